@@ -1,0 +1,100 @@
+//! The `talus` command line: `talus run` and `talus check`, the run loop with
+//! progress, the JSON run report, and the last good state kept for blow-ups.
+//!
+//! The binary in the workspace root supplies the registry of contact laws; this crate
+//! never names a law.
+
+pub mod report;
+pub mod run;
+
+pub use report::{Report, ReportSample};
+pub use run::{RunError, RunOptions, RunSummary, check_scene, run_scene};
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use talus_contact::LawRegistry;
+
+/// Talus: discrete-element simulation of granular matter.
+#[derive(Parser, Debug)]
+#[command(name = "talus", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Sub-commands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Run a scene, writing DIR/recording.rrd and DIR/report.json.
+    Run {
+        /// The scene file (RON).
+        scene: PathBuf,
+        /// Output folder. Default: out/<scene name>/.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads. Default: all cores.
+        #[arg(long)]
+        threads: Option<usize>,
+        /// No progress bar and no summary.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Validate a scene and print its plan without running it.
+    Check {
+        /// The scene file (RON).
+        scene: PathBuf,
+    },
+}
+
+/// Runs the command line with the given contact laws.
+pub fn main_with(registry: LawRegistry) -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Check { scene } => match check_scene(&scene, &registry) {
+            Ok(text) => {
+                print!("{text}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
+        },
+        Command::Run {
+            scene,
+            out,
+            threads,
+            quiet,
+        } => {
+            if let Some(n) = threads
+                && let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n).build_global()
+            {
+                eprintln!("error: cannot start {n} threads: {e}");
+                return ExitCode::from(2);
+            }
+            let options = RunOptions {
+                out,
+                quiet,
+                progress: !quiet,
+            };
+            match run_scene(&scene, &registry, &options) {
+                Ok(summary) => {
+                    if !quiet {
+                        println!("{}", summary.describe());
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::from(match e {
+                        RunError::Scene(_) => 2,
+                        _ => 1,
+                    })
+                }
+            }
+        }
+    }
+}

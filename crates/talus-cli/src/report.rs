@@ -1,0 +1,139 @@
+//! The JSON run report: what ran, how long each stage took, and the energy series.
+//! Its format is documented in `docs/report-format.md`.
+
+use std::collections::BTreeMap;
+
+use bevy_ecs::prelude::*;
+use serde::{Deserialize, Serialize};
+use talus_core::prelude::*;
+
+/// One sample of the energy series.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct ReportSample {
+    /// Step number.
+    pub step: u64,
+    /// Simulated time, s.
+    pub time: f64,
+    /// Σ ½ m v², J.
+    pub translational_kinetic: f64,
+    /// Σ ½ I ω², J.
+    pub rotational_kinetic: f64,
+    /// Elastic energy stored in contacts, J.
+    pub elastic: f64,
+    /// Energy dissipated since the start, per mechanism, J.
+    pub dissipated: BTreeMap<String, f64>,
+    /// Sum of `dissipated`, J.
+    pub dissipated_total: f64,
+    /// Work done on the grains by gravity since the start, J.
+    pub gravity_work: f64,
+    /// Work done on the grains by moving walls since the start, J.
+    pub wall_work: f64,
+    /// kinetic + elastic + dissipated − work by gravity and walls: constant when the
+    /// bookkeeping closes, J.
+    pub energy_balance: f64,
+    /// Active contacts.
+    pub contacts: usize,
+    /// Largest overlap / radius.
+    pub max_overlap_ratio: f64,
+}
+
+impl ReportSample {
+    /// Samples the current state of a world.
+    pub fn take(world: &World) -> Self {
+        let clock = world.resource::<Clock>();
+        let e = world.resource::<EnergySnapshot>();
+        let ledger = world.resource::<EnergyLedger>();
+        let names = &world.resource::<DissipationChannels>().names;
+        let dissipated: BTreeMap<String, f64> = names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.clone(), ledger.dissipated.get(i).copied().unwrap_or(0.0)))
+            .collect();
+        let dissipated_total = ledger.total_dissipated();
+        Self {
+            step: clock.step,
+            time: clock.time,
+            translational_kinetic: e.translational_kinetic,
+            rotational_kinetic: e.rotational_kinetic,
+            elastic: e.elastic,
+            dissipated,
+            dissipated_total,
+            gravity_work: ledger.gravity_work,
+            wall_work: ledger.wall_work,
+            energy_balance: e.translational_kinetic + e.rotational_kinetic + e.elastic
+                + dissipated_total
+                - ledger.gravity_work
+                - ledger.wall_work,
+            contacts: e.contacts,
+            max_overlap_ratio: e.max_overlap_ratio,
+        }
+    }
+
+    /// Total kinetic energy.
+    pub fn kinetic(&self) -> f64 {
+        self.translational_kinetic + self.rotational_kinetic
+    }
+}
+
+/// Wall-clock time of a run.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Default)]
+pub struct WallClock {
+    /// Whole run (excluding scene building), s.
+    pub total: f64,
+    /// Per stage, s.
+    pub stages: BTreeMap<String, f64>,
+    /// Grain-steps per second.
+    pub grain_steps_per_second: f64,
+}
+
+/// A blow-up as reported.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct BlowUpReport {
+    /// Step at which it was found.
+    pub step: u64,
+    /// What exceeded which bound.
+    pub reason: String,
+    /// Entity ids (index and generation bits) of the bodies involved.
+    pub bodies: Vec<u64>,
+    /// File holding the last good state.
+    pub last_good_state: Option<String>,
+}
+
+/// The whole report.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Report {
+    /// Scene name.
+    pub scene: String,
+    /// Scene file.
+    pub scene_file: String,
+    /// Talus version.
+    pub talus_version: String,
+    /// 2 or 3.
+    pub dimension: u8,
+    /// Time step, s.
+    pub time_step: f64,
+    /// How the time step was chosen.
+    pub time_step_reason: String,
+    /// Integrator.
+    pub integrator: String,
+    /// Whether rotation was integrated.
+    pub rotation: bool,
+    /// Number of grains.
+    pub grain_count: usize,
+    /// Steps run.
+    pub steps: u64,
+    /// Simulated time, s.
+    pub simulated_time: f64,
+    /// Why the run stopped: "completed", "settled" or "blow_up".
+    pub stopped: String,
+    /// Plugins built.
+    pub plugins: Vec<String>,
+    /// Dissipation mechanisms.
+    pub dissipation_channels: Vec<String>,
+    /// Energy series.
+    pub samples: Vec<ReportSample>,
+    /// Timings (excluded from determinism comparisons).
+    pub wall_clock: WallClock,
+    /// Set if the run blew up.
+    pub blow_up: Option<BlowUpReport>,
+}

@@ -1,0 +1,341 @@
+//! Running a scene: build, step with progress, sample the report, write the outputs,
+//! and on a blow-up stop with a diagnosis and the last good state on disk.
+
+use std::fmt;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use bevy_ecs::prelude::*;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+use talus_contact::LawRegistry;
+use talus_core::prelude::*;
+use talus_scene::SceneError;
+
+use crate::report::{BlowUpReport, Report, ReportSample, WallClock};
+
+/// How to run.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Output folder; default `out/<scene name>/`.
+    pub out: Option<PathBuf>,
+    /// Print nothing but errors.
+    pub quiet: bool,
+    /// Show a progress bar (only drawn on a terminal).
+    pub progress: bool,
+}
+
+/// What a finished run produced.
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    /// Output folder.
+    pub out_dir: PathBuf,
+    /// The recording, if one was written.
+    pub recording: Option<PathBuf>,
+    /// The report file.
+    pub report_path: PathBuf,
+    /// The report.
+    pub report: Report,
+}
+
+impl RunSummary {
+    /// A few lines for the terminal.
+    pub fn describe(&self) -> String {
+        let r = &self.report;
+        let mut s = format!(
+            "{}: {} grains, {} steps of {:.3e} s ({:.4} s simulated, {}) in {:.2} s wall clock ({:.3e} grain-steps/s)\n",
+            r.scene,
+            r.grain_count,
+            r.steps,
+            r.time_step,
+            r.simulated_time,
+            r.stopped,
+            r.wall_clock.total,
+            r.wall_clock.grain_steps_per_second
+        );
+        s += &format!("report:    {}\n", self.report_path.display());
+        if let Some(rec) = &self.recording {
+            s += &format!("recording: {}  (open with the rerun viewer 0.36.3: `rerun {}`)\n", rec.display(), rec.display());
+        }
+        s
+    }
+}
+
+/// Why a run failed.
+#[derive(Debug)]
+pub enum RunError {
+    /// The scene is invalid.
+    Scene(SceneError),
+    /// An output could not be written.
+    Output(String),
+    /// The state became unphysical; the report and the last good state were written.
+    BlowUp {
+        /// Diagnosis.
+        message: String,
+        /// The report written before stopping.
+        report_path: PathBuf,
+    },
+}
+
+impl fmt::Display for RunError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RunError::Scene(e) => write!(f, "{e}"),
+            RunError::Output(e) => write!(f, "{e}"),
+            RunError::BlowUp {
+                message,
+                report_path,
+            } => write!(f, "{message}\nreport: {}", report_path.display()),
+        }
+    }
+}
+
+impl std::error::Error for RunError {}
+
+impl From<SceneError> for RunError {
+    fn from(e: SceneError) -> Self {
+        RunError::Scene(e)
+    }
+}
+
+/// Validates a scene and describes its plan.
+pub fn check_scene(path: &Path, registry: &LawRegistry) -> Result<String, SceneError> {
+    let scene = talus_scene::load(path)?;
+    let built = scene.build(registry)?;
+    let plan = built.builder.plan();
+    let mut s = format!("scene `{}` ({}): valid\n", built.name, path.display());
+    s += &format!("plugins built: {}\n", plan.plugins.join(", "));
+    for note in &plan.notes {
+        s += &format!("{note}\n");
+    }
+    if built.output.recording {
+        s += &format!(
+            "export: rerun recording every {} s of simulated time\n",
+            built.output.recording_interval
+        );
+    }
+    s += "stages:\n";
+    for (stage, systems) in &plan.stages {
+        s += &format!(
+            "  {:<22} {}\n",
+            stage.name(),
+            if systems.is_empty() {
+                "-".to_string()
+            } else {
+                systems.join(", ")
+            }
+        );
+    }
+    Ok(s)
+}
+
+#[derive(Serialize)]
+struct GrainState {
+    entity: u64,
+    position: [f64; 3],
+    velocity: [f64; 3],
+    angular_velocity: [f64; 3],
+    radius: f64,
+    material: u16,
+}
+
+#[derive(Serialize)]
+struct SavedState {
+    step: u64,
+    time: f64,
+    grains: Vec<GrainState>,
+}
+
+fn save_state(world: &mut World) -> SavedState {
+    let clock = *world.resource::<Clock>();
+    let mut q = world.query_filtered::<(
+        Entity,
+        &Position,
+        &Velocity,
+        &AngularVelocity,
+        &Radius,
+        &MaterialId,
+    ), With<Grain>>();
+    SavedState {
+        step: clock.step,
+        time: clock.time,
+        grains: q
+            .iter(world)
+            .map(|(e, p, v, w, r, m)| GrainState {
+                entity: e.to_bits(),
+                position: p.0.to_array(),
+                velocity: v.0.to_array(),
+                angular_velocity: w.0.to_array(),
+                radius: r.0,
+                material: m.0,
+            })
+            .collect(),
+    }
+}
+
+fn steps_for(interval: f64, dt: f64) -> u64 {
+    ((interval / dt).round() as u64).max(1)
+}
+
+/// Builds and runs a scene, writing the report (and the recording if asked for).
+pub fn run_scene(
+    path: &Path,
+    registry: &LawRegistry,
+    options: &RunOptions,
+) -> Result<RunSummary, RunError> {
+    let scene = talus_scene::load(path)?;
+    let built = scene.build(registry)?;
+    let out_dir = options
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join(&built.name));
+    std::fs::create_dir_all(&out_dir)
+        .map_err(|e| RunError::Output(format!("cannot create {}: {e}", out_dir.display())))?;
+    let mut builder = built.builder;
+    let dt = builder.config().dt;
+    let recording = if built.output.recording {
+        let rec = out_dir.join("recording.rrd");
+        let every = steps_for(built.output.recording_interval, dt);
+        talus_rerun::RerunExportPlugin::new(&rec, every)
+            .with_recording_name(format!("talus/{}", built.name))
+            .install(&mut builder)
+            .map_err(|e| RunError::Output(format!("cannot write {}: {e}", rec.display())))?;
+        Some(rec)
+    } else {
+        None
+    };
+    let mut sim = builder.build();
+    let report_every = steps_for(built.output.report_interval, dt);
+    let config = sim.config().clone();
+    let total_steps = built.stop.steps;
+
+    let progress = if options.progress && !options.quiet && std::io::stderr().is_terminal() {
+        let bar = ProgressBar::with_draw_target(Some(total_steps), ProgressDrawTarget::stderr());
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} steps  t = {msg}  {per_sec}  ETA {eta}",
+            )
+            .expect("valid template"),
+        );
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let progress_every = (total_steps / 500).max(1);
+
+    let start = Instant::now();
+    let mut samples = Vec::new();
+    let mut stopped = "completed".to_string();
+    let mut blow_up = None;
+    let mut last_good = None;
+    let primed = sim.prime();
+    if let Err(b) = primed {
+        blow_up = Some(b);
+    } else {
+        samples.push(ReportSample::take(&sim.world));
+        last_good = Some(save_state(&mut sim.world));
+        for step in 1..=total_steps {
+            if let Err(b) = sim.step() {
+                blow_up = Some(b);
+                break;
+            }
+            if step % progress_every == 0 {
+                progress.set_position(step);
+                progress.set_message(format!("{:.4} s", sim.time()));
+            }
+            if step % report_every == 0 || step == total_steps {
+                let sample = ReportSample::take(&sim.world);
+                let settled = built
+                    .stop
+                    .settle_kinetic_energy
+                    .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
+                samples.push(sample);
+                last_good = Some(save_state(&mut sim.world));
+                if settled {
+                    stopped = "settled".into();
+                    break;
+                }
+            }
+        }
+    }
+    progress.finish_and_clear();
+    let elapsed = start.elapsed().as_secs_f64();
+    if recording.is_some() {
+        talus_rerun::finish(&mut sim.world).map_err(|e| RunError::Output(format!("recording: {e}")))?;
+    }
+
+    let timings = sim.world.resource::<StageTimings>();
+    let steps_run = sim.step_count();
+    let mut report = Report {
+        scene: built.name.clone(),
+        scene_file: path.display().to_string(),
+        talus_version: env!("CARGO_PKG_VERSION").to_string(),
+        dimension: config.dimension.as_number(),
+        time_step: config.dt,
+        time_step_reason: built.time_step_reason.clone(),
+        integrator: format!("{:?}", config.integrator),
+        rotation: config.rotation,
+        grain_count: built.grain_count,
+        steps: steps_run,
+        simulated_time: sim.time(),
+        stopped,
+        plugins: sim.plan.plugins.clone(),
+        dissipation_channels: sim.world.resource::<DissipationChannels>().names.clone(),
+        samples,
+        wall_clock: WallClock {
+            total: elapsed,
+            stages: Stage::ALL
+                .iter()
+                .map(|s| (s.name().to_string(), timings.get(*s)))
+                .collect(),
+            grain_steps_per_second: built.grain_count as f64 * steps_run as f64 / elapsed.max(1e-12),
+        },
+        blow_up: None,
+    };
+    let report_path = out_dir.join("report.json");
+    let mut blow_message = None;
+    if let Some(b) = blow_up {
+        report.stopped = "blow_up".into();
+        let state_path = out_dir.join("last_good_state.json");
+        let written = last_good
+            .as_ref()
+            .map(|s| write_json(&state_path, s))
+            .transpose()?
+            .map(|_| state_path.display().to_string());
+        let bodies: Vec<String> = b.entities.iter().map(|e| format!("{e}")).collect();
+        blow_message = Some(format!(
+            "run stopped at step {}: {}\nbodies involved: {}\nlast good state (step {}): {}",
+            b.step,
+            b.reason,
+            if bodies.is_empty() { "-".to_string() } else { bodies.join(", ") },
+            last_good.as_ref().map(|s| s.step).unwrap_or(0),
+            written.clone().unwrap_or_else(|| "none".into())
+        ));
+        report.blow_up = Some(BlowUpReport {
+            step: b.step,
+            reason: b.reason,
+            bodies: b.entities.iter().map(|e| e.to_bits()).collect(),
+            last_good_state: written,
+        });
+    }
+    write_json(&report_path, &report)?;
+    if let Some(message) = blow_message {
+        return Err(RunError::BlowUp {
+            message,
+            report_path,
+        });
+    }
+    Ok(RunSummary {
+        out_dir,
+        recording,
+        report_path,
+        report,
+    })
+}
+
+fn write_json(path: &Path, value: &impl Serialize) -> Result<(), RunError> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| RunError::Output(format!("cannot encode {}: {e}", path.display())))?;
+    std::fs::write(path, text).map_err(|e| RunError::Output(format!("cannot write {}: {e}", path.display())))
+}

@@ -1,0 +1,115 @@
+//! The broad phase: grains binned into a uniform grid by a counting sort.
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use talus_core::snapshot::GrainSnapshot;
+
+/// Grains binned into cubic cells, rebuilt every step. Cells are stored densely
+/// (x fastest); `sorted[cell_start[c]..cell_start[c + 1]]` are the grains of cell `c`.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct CellGrid {
+    /// Lower corner of cell (0, 0, 0).
+    pub origin: DVec3,
+    /// Cell edge, m.
+    pub cell: f64,
+    /// Cells along x, y, z.
+    pub dims: [usize; 3],
+    /// Start of each cell's run in `sorted`, plus one final entry.
+    pub cell_start: Vec<u32>,
+    /// Dense grain indices sorted by cell.
+    pub sorted: Vec<u32>,
+    /// Cell of each grain.
+    pub cell_of: Vec<u32>,
+    /// Interaction range beyond touch (r_c), m. Default: 0.
+    pub interaction_range: f64,
+    cursor: Vec<u32>,
+}
+
+impl CellGrid {
+    /// Cell coordinates of a position (clamped into the grid).
+    #[inline]
+    pub fn coords(&self, p: DVec3) -> [usize; 3] {
+        let q = (p - self.origin) / self.cell;
+        [
+            (q.x.max(0.0) as usize).min(self.dims[0] - 1),
+            (q.y.max(0.0) as usize).min(self.dims[1] - 1),
+            (q.z.max(0.0) as usize).min(self.dims[2] - 1),
+        ]
+    }
+
+    /// Dense cell index.
+    #[inline]
+    pub fn index(&self, c: [usize; 3]) -> usize {
+        c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])
+    }
+
+    /// Grains of a cell.
+    #[inline]
+    pub fn cell_grains(&self, cell: usize) -> &[u32] {
+        &self.sorted[self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize]
+    }
+
+    /// Rebuilds the grid over the grains of a snapshot.
+    pub fn rebuild(&mut self, s: &GrainSnapshot) {
+        let n = s.len();
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in &s.position {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        if n == 0 || !lo.is_finite() || !hi.is_finite() {
+            lo = DVec3::ZERO;
+            hi = DVec3::ZERO;
+        }
+        // Edge ≥ 2 R_max + r_c so that touching grains are never more than one cell apart.
+        let mut cell = (2.0 * s.max_radius + self.interaction_range).max(1e-12) * (1.0 + 1e-9);
+        let extent = hi - lo;
+        // Bound the cell count (a grain flung far away must not blow up memory).
+        let max_cells = (8 * n).max(4096) as f64;
+        loop {
+            let cells = (extent / cell).floor() + DVec3::ONE;
+            if cells.x * cells.y * cells.z <= max_cells {
+                self.dims = [cells.x as usize, cells.y as usize, cells.z as usize];
+                break;
+            }
+            cell *= 1.5;
+        }
+        self.origin = lo;
+        self.cell = cell;
+        let total = self.dims[0] * self.dims[1] * self.dims[2];
+        self.cell_of.clear();
+        self.cell_of.extend(s.position.iter().map(|p| {
+            let q = (*p - lo) / cell;
+            let c = [
+                (q.x as usize).min(self.dims[0] - 1),
+                (q.y as usize).min(self.dims[1] - 1),
+                (q.z as usize).min(self.dims[2] - 1),
+            ];
+            (c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])) as u32
+        }));
+        self.cell_start.clear();
+        self.cell_start.resize(total + 1, 0);
+        for &c in &self.cell_of {
+            self.cell_start[c as usize + 1] += 1;
+        }
+        for c in 0..total {
+            self.cell_start[c + 1] += self.cell_start[c];
+        }
+        self.sorted.clear();
+        self.sorted.resize(n, 0);
+        // Fill in grain order: within a cell grains stay sorted by dense index.
+        self.cursor.clear();
+        self.cursor.extend_from_slice(&self.cell_start[..total]);
+        for i in 0..n {
+            let c = self.cell_of[i] as usize;
+            self.sorted[self.cursor[c] as usize] = i as u32;
+            self.cursor[c] += 1;
+        }
+    }
+}
+
+/// Broad-phase system: bins the snapshot's grains.
+pub fn build_cell_grid(snapshot: Res<GrainSnapshot>, mut grid: ResMut<CellGrid>) {
+    grid.rebuild(&snapshot);
+}

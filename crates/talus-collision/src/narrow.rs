@@ -1,0 +1,182 @@
+//! The narrow phase: exact overlap tests on the grid's neighbour stencil, and the
+//! life cycle of contact entities (created when a pair starts touching, kept while it
+//! touches, removed when it separates).
+
+use bevy_ecs::prelude::*;
+use rayon::prelude::*;
+use smallvec::SmallVec;
+use talus_contact::{Contact, ContactKind, systems::ContactLawTable};
+use talus_core::snapshot::GrainSnapshot;
+
+use crate::grid::CellGrid;
+
+/// Grains per parallel work unit of the pair search; fixed, so that the order of the
+/// found pairs does not depend on the number of threads.
+const CHUNK: usize = 256;
+
+/// One live contact as seen from its first body.
+#[derive(Clone, Copy, Debug)]
+struct IndexEntry {
+    partner: Entity,
+    contact: Entity,
+    seen: u64,
+}
+
+/// Live contacts of each grain, keyed by the grain entity's index: finding whether a
+/// pair already has a contact is a scan of a handful of entries, no hashing.
+#[derive(Resource, Default)]
+pub struct ContactIndex {
+    per_grain: Vec<SmallVec<[IndexEntry; 6]>>,
+    pass: u64,
+    /// Pairs found touching this pass, per chunk of grains (dense indices; walls are
+    /// encoded as `u32::MAX - wall index`).
+    found: Vec<Vec<(u32, u32)>>,
+}
+
+impl ContactIndex {
+    /// Number of live contacts.
+    pub fn len(&self) -> usize {
+        self.per_grain.iter().map(|v| v.len()).sum()
+    }
+
+    /// Whether there is no live contact.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The contact entity of a pair, if they are in contact.
+    pub fn contact_between(&self, a: Entity, b: Entity) -> Option<Entity> {
+        let (a, b) = canonical(a, b);
+        self.per_grain
+            .get(a.index_u32() as usize)?
+            .iter()
+            .find(|e| e.partner == b)
+            .map(|e| e.contact)
+    }
+}
+
+fn canonical(a: Entity, b: Entity) -> (Entity, Entity) {
+    if a <= b { (a, b) } else { (b, a) }
+}
+
+/// Finds all touching grain–grain and grain–wall pairs, in parallel over fixed chunks.
+pub fn find_touching_pairs(
+    snapshot: Res<GrainSnapshot>,
+    grid: Res<CellGrid>,
+    mut index: ResMut<ContactIndex>,
+) {
+    let s = &*snapshot;
+    let grid = &*grid;
+    let n = s.len();
+    let chunks = n.div_ceil(CHUNK);
+    let range = grid.interaction_range;
+    if index.found.len() < chunks {
+        index.found.resize_with(chunks, Vec::new);
+    }
+    index.found[..chunks]
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(chunk, out)| {
+            out.clear();
+            for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
+                let p = s.position[i];
+                let r = s.radius[i];
+                let c = grid.coords(p);
+                let z = c[2].saturating_sub(1)..=(c[2] + 1).min(grid.dims[2] - 1);
+                for cz in z {
+                    for cy in c[1].saturating_sub(1)..=(c[1] + 1).min(grid.dims[1] - 1) {
+                        for cx in c[0].saturating_sub(1)..=(c[0] + 1).min(grid.dims[0] - 1) {
+                            for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
+                                if (j as usize) <= i {
+                                    continue;
+                                }
+                                let reach = r + s.radius[j as usize] + range;
+                                if p.distance_squared(s.position[j as usize]) < reach * reach {
+                                    out.push((i as u32, j));
+                                }
+                            }
+                        }
+                    }
+                }
+                for (w, wall) in s.walls.iter().enumerate() {
+                    if (p - wall.point).dot(wall.normal) < r + range {
+                        out.push((i as u32, u32::MAX - w as u32));
+                    }
+                }
+            }
+        });
+}
+
+/// Creates contact entities for new pairs (with the law of their material pair) and
+/// removes those whose pair no longer touches.
+pub fn update_contacts(world: &mut World) {
+    world.resource_scope(|world, mut index: Mut<ContactIndex>| {
+        world.resource_scope(|world, table: Mut<ContactLawTable>| {
+            world.resource_scope(|world, snapshot: Mut<GrainSnapshot>| {
+                update_contacts_inner(world, &mut index, &table, &snapshot);
+            });
+        });
+    });
+}
+
+fn update_contacts_inner(
+    world: &mut World,
+    index: &mut ContactIndex,
+    table: &ContactLawTable,
+    s: &GrainSnapshot,
+) {
+    index.pass += 1;
+    let pass = index.pass;
+    let ContactIndex {
+        per_grain, found, ..
+    } = index;
+    let max_entity = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
+    if per_grain.len() <= max_entity {
+        per_grain.resize_with(max_entity + 1, SmallVec::new);
+    }
+    let chunks = s.len().div_ceil(CHUNK);
+    for list in &found[..chunks] {
+        for &(i, j) in list {
+            let ea = s.entity[i as usize];
+            let (a, b, kind, mat_b) = if j > u32::MAX - 1024 {
+                let wall = &s.walls[(u32::MAX - j) as usize];
+                (ea, wall.entity, ContactKind::GrainWall, wall.material)
+            } else {
+                let (a, b) = canonical(ea, s.entity[j as usize]);
+                (a, b, ContactKind::GrainGrain, s.material[j as usize])
+            };
+            let entries = &mut per_grain[a.index_u32() as usize];
+            if let Some(entry) = entries.iter_mut().find(|e| e.partner == b) {
+                entry.seen = pass;
+                continue;
+            }
+            let Some(slot) = table.get(s.material[i as usize], mat_b) else {
+                continue; // this material pair does not interact
+            };
+            let contact = (slot.spawn)(
+                world,
+                Contact {
+                    a,
+                    b,
+                    kind,
+                    pair_slot: slot.pair_slot,
+                },
+            );
+            per_grain[a.index_u32() as usize].push(IndexEntry {
+                partner: b,
+                contact,
+                seen: pass,
+            });
+        }
+    }
+    for entries in per_grain.iter_mut() {
+        entries.retain(|e| {
+            if e.seen == pass {
+                true
+            } else {
+                world.despawn(e.contact);
+                false
+            }
+        });
+    }
+}

@@ -1,0 +1,69 @@
+//! Components of contact entities and the resources that index them.
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use talus_core::energy::MAX_DISSIPATION_CHANNELS;
+
+/// What kind of bodies a contact joins.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ContactKind {
+    /// Two grains; `a` and `b` are grain entities.
+    GrainGrain,
+    /// A grain (`a`) and a plane wall (`b`).
+    GrainWall,
+}
+
+/// The pair a contact joins, fixed for the contact's life.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Contact {
+    /// First body, always a grain; forces are reported as acting on it.
+    pub a: Entity,
+    /// Second body: a grain or a wall.
+    pub b: Entity,
+    /// Grain–grain or grain–wall.
+    pub kind: ContactKind,
+    /// Index into the law's per-material-pair parameter table.
+    pub pair_slot: u32,
+}
+
+/// Geometry of the last evaluation.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactGeometry {
+    /// Unit normal pointing from `b` towards `a`.
+    pub normal: DVec3,
+    /// Overlap δ = R_a + R_b − distance (walls: R_a − distance to plane), metres.
+    pub overlap: f64,
+    /// Contact point (middle of the overlap).
+    pub point: DVec3,
+}
+
+/// Force and torques of the last evaluation.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactForce {
+    /// Force on `a` (its opposite acts on `b`), N.
+    pub force: DVec3,
+    /// Torque on `a` about its centre, N m.
+    pub torque_a: DVec3,
+    /// Torque on `b` about its centre, N m (zero for walls).
+    pub torque_b: DVec3,
+}
+
+impl ContactForce {
+    /// Normal component of the force (positive when repulsive).
+    pub fn normal_force(&self, geometry: &ContactGeometry) -> f64 {
+        self.force.dot(geometry.normal)
+    }
+}
+
+/// Energy held and dissipated by a contact.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactEnergy {
+    /// Elastic energy stored now, J.
+    pub elastic: f64,
+    /// Energy dissipated during the last step, per global dissipation channel, J.
+    pub dissipated: [f64; MAX_DISSIPATION_CHANNELS],
+}
+
+/// The law's per-contact history, e.g. a tangential spring.
+#[derive(Component, Clone, Debug, Default)]
+pub struct LawState<H: Send + Sync + 'static>(pub H);

@@ -1,0 +1,95 @@
+//! Contact kinematics: geometry and relative motion of a pair, computed from the snapshot.
+
+use glam::DVec3;
+use talus_core::snapshot::{GrainSnapshot, WallState};
+
+/// Everything a contact law needs to know about the pair at this instant.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactKinematics {
+    /// Unit normal from `b` to `a`.
+    pub normal: DVec3,
+    /// Overlap δ (positive in contact), m.
+    pub overlap: f64,
+    /// Contact point.
+    pub point: DVec3,
+    /// Contact point minus the centre of `a`.
+    pub branch_a: DVec3,
+    /// Contact point minus the centre of `b` (zero for walls).
+    pub branch_b: DVec3,
+    /// Velocity of `a`'s material point at the contact minus `b`'s.
+    pub relative_velocity: DVec3,
+    /// Normal relative velocity, v·n: positive while separating.
+    pub normal_velocity: f64,
+    /// Tangential relative velocity at the contact point.
+    pub tangential_velocity: DVec3,
+    /// ω_a − ω_b (ω_a for walls).
+    pub relative_omega: DVec3,
+    /// Reduced mass m_a m_b / (m_a + m_b) (walls: m_a), kg.
+    pub effective_mass: f64,
+    /// Reduced radius R_a R_b / (R_a + R_b) (walls: R_a), m.
+    pub effective_radius: f64,
+    /// Smaller radius of the pair, m.
+    pub min_radius: f64,
+}
+
+impl ContactKinematics {
+    /// Kinematics of grains `i` (a) and `j` (b) of the snapshot.
+    #[inline]
+    pub fn grain_grain(s: &GrainSnapshot, i: usize, j: usize) -> Self {
+        let (ra, rb) = (s.radius[i], s.radius[j]);
+        let d = s.position[i] - s.position[j];
+        let dist = d.length();
+        let normal = if dist > 0.0 { d / dist } else { DVec3::Z };
+        let overlap = ra + rb - dist;
+        let branch_a = -normal * (ra - 0.5 * overlap);
+        let branch_b = normal * (rb - 0.5 * overlap);
+        let point = s.position[j] + branch_b;
+        let (wa, wb) = (s.omega[i], s.omega[j]);
+        let relative_velocity =
+            (s.velocity[i] + wa.cross(branch_a)) - (s.velocity[j] + wb.cross(branch_b));
+        let normal_velocity = relative_velocity.dot(normal);
+        let (ma, mb) = (s.mass[i], s.mass[j]);
+        Self {
+            normal,
+            overlap,
+            point,
+            branch_a,
+            branch_b,
+            relative_velocity,
+            normal_velocity,
+            tangential_velocity: relative_velocity - normal * normal_velocity,
+            relative_omega: wa - wb,
+            effective_mass: ma * mb / (ma + mb),
+            effective_radius: ra * rb / (ra + rb),
+            min_radius: ra.min(rb),
+        }
+    }
+
+    /// Kinematics of grain `i` (a) against a wall (b).
+    #[inline]
+    pub fn grain_wall(s: &GrainSnapshot, i: usize, wall: &WallState) -> Self {
+        let ra = s.radius[i];
+        let normal = wall.normal;
+        let distance = (s.position[i] - wall.point).dot(normal);
+        let overlap = ra - distance;
+        let branch_a = -normal * (ra - 0.5 * overlap);
+        let point = s.position[i] + branch_a;
+        let wa = s.omega[i];
+        let relative_velocity = s.velocity[i] + wa.cross(branch_a) - wall.velocity;
+        let normal_velocity = relative_velocity.dot(normal);
+        Self {
+            normal,
+            overlap,
+            point,
+            branch_a,
+            branch_b: DVec3::ZERO,
+            relative_velocity,
+            normal_velocity,
+            tangential_velocity: relative_velocity - normal * normal_velocity,
+            relative_omega: wa,
+            effective_mass: s.mass[i],
+            effective_radius: ra,
+            min_radius: ra,
+        }
+    }
+}

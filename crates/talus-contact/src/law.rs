@@ -1,0 +1,193 @@
+//! The contact-law extension API.
+//!
+//! Writing a law takes two parts:
+//! * [`ContactLaw`]: the typed, per-contact force routine with its parameter and
+//!   history types. The core runs it in parallel over the law's contacts.
+//! * [`LawDescriptor`]: what a scene sees: the law's name, its declared parameters,
+//!   validation, and installation (usually one call to [`install_law`]).
+
+use std::any::Any;
+
+use bevy_ecs::prelude::*;
+use talus_core::energy::{DissipationChannels, MAX_DISSIPATION_CHANNELS};
+use talus_core::schedule::{SimBuilder, Stage};
+
+use crate::components::*;
+use crate::kinematics::ContactKinematics;
+use crate::params::{ParamError, ParamSpec, ParamValues};
+use crate::systems::{ContactLawTable, LawSlot, evaluate_law};
+
+/// What a law returns for one contact in one step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactResponse {
+    /// Force on body `a` acting at the contact point, N. The core adds the
+    /// torques branch × force itself.
+    pub force: glam::DVec3,
+    /// Extra torque on `a` besides branch × force (rolling, twisting), N m.
+    pub torque_a: glam::DVec3,
+    /// Extra torque on `b` besides branch × force, N m.
+    pub torque_b: glam::DVec3,
+    /// Elastic energy stored in the contact after this step, J.
+    pub elastic_energy: f64,
+    /// Energy dissipated during this step, per entry of [`ContactLaw::DISSIPATION`], J.
+    pub dissipated: [f64; MAX_DISSIPATION_CHANNELS],
+}
+
+/// A contact law's force routine.
+pub trait ContactLaw: Send + Sync + 'static {
+    /// Parameters resolved for one material pair (after mixing and validation).
+    type Params: Clone + Send + Sync + 'static;
+    /// Per-contact history, created with `Default` when the contact starts.
+    type History: Default + Clone + Send + Sync + 'static;
+    /// Names of the dissipation mechanisms, indexing [`ContactResponse::dissipated`].
+    const DISSIPATION: &'static [&'static str];
+
+    /// Computes the response of one contact and updates its history over a step `dt`
+    /// (`dt` is 0 in the priming pass that evaluates the initial forces).
+    fn evaluate(
+        params: &Self::Params,
+        kin: &ContactKinematics,
+        history: &mut Self::History,
+        dt: f64,
+    ) -> ContactResponse;
+}
+
+/// One material pair assigned to a law by a scene.
+#[derive(Clone, Debug)]
+pub struct PairAssignment {
+    /// Material ids (a ≤ b).
+    pub materials: (u16, u16),
+    /// Material names, for messages.
+    pub names: (String, String),
+    /// Parameters after mixing, overrides and defaults.
+    pub values: ParamValues,
+    /// Smallest reduced mass among the pairs of grains (and walls) with these materials, kg.
+    pub min_effective_mass: f64,
+    /// Smallest reduced radius among those pairs, m.
+    pub min_effective_radius: f64,
+    /// Whether the pair is a grain–wall pair only (no grain of one of the materials).
+    pub dimension: talus_core::resources::Dimension,
+}
+
+/// Time scales of a law for one pair: what the automatic time step is made from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimeScale {
+    /// Duration of a binary collision for the lightest pair, s.
+    pub contact_time: f64,
+    /// Largest step for which the integration of that contact is stable, s.
+    pub stability_limit: f64,
+}
+
+/// What a scene sees of a law.
+pub trait LawDescriptor: Send + Sync {
+    /// The name scenes use.
+    fn name(&self) -> &'static str;
+    /// One line for `talus check` and the docs.
+    fn summary(&self) -> &'static str;
+    /// Declared parameters.
+    fn params(&self) -> &'static [ParamSpec];
+    /// Cross-field checks on a full parameter set (ranges are already checked).
+    fn validate(&self, values: &ParamValues) -> Result<(), ParamError>;
+    /// Whether the law can torque a grain with these parameters (so rotation is needed).
+    fn produces_torque(&self, values: &ParamValues) -> bool;
+    /// Resolves the typed parameters of one pair and its time scales.
+    fn resolve(&self, pair: &PairAssignment) -> Result<(Box<dyn Any + Send + Sync>, TimeScale), ParamError>;
+    /// Installs the law for the given pairs, with the typed parameters from [`Self::resolve`].
+    fn install(&self, sim: &mut SimBuilder, pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)]);
+}
+
+/// The typed per-pair parameter table of a law.
+#[derive(Resource)]
+pub struct PairParams<L: ContactLaw>(pub Vec<L::Params>);
+
+/// Global dissipation channel ids of a law's mechanisms.
+#[derive(Resource)]
+pub struct LawChannels<L: ContactLaw> {
+    /// Global channel id of each entry of [`ContactLaw::DISSIPATION`].
+    pub ids: Vec<usize>,
+    _law: std::marker::PhantomData<fn() -> L>,
+}
+
+fn spawn_contact<L: ContactLaw>(world: &mut World, contact: Contact) -> Entity {
+    world
+        .spawn((
+            contact,
+            ContactGeometry::default(),
+            ContactForce::default(),
+            ContactEnergy::default(),
+            LawState::<L::History>(L::History::default()),
+        ))
+        .id()
+}
+
+/// Installs a law for the given pairs: registers its dissipation channels, its
+/// parameter table, its contact spawner for each pair, and its force system.
+/// Requires [`crate::ContactPlugin`] to have been added.
+pub fn install_law<L: ContactLaw>(
+    sim: &mut SimBuilder,
+    name: &'static str,
+    pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)],
+) {
+    let ids: Vec<usize> = {
+        let mut channels = sim.world.resource_mut::<DissipationChannels>();
+        L::DISSIPATION.iter().map(|c| channels.register(c)).collect()
+    };
+    assert!(ids.iter().all(|&i| i < MAX_DISSIPATION_CHANNELS));
+    let mut table = Vec::with_capacity(pairs.len());
+    for (slot, (pair, params)) in pairs.iter().enumerate() {
+        let params = params
+            .downcast_ref::<L::Params>()
+            .expect("resolve() returns this law's parameter type")
+            .clone();
+        table.push(params);
+        let n = sim.world.resource::<talus_core::resources::Materials>().len();
+        let (a, b) = pair.materials;
+        let mut law_table = sim.world.resource_mut::<ContactLawTable>();
+        if law_table.slots.len() < n * n {
+            law_table.slots.resize(n * n, None);
+        }
+        let entry = Some(LawSlot {
+            law: name,
+            pair_slot: slot as u32,
+            spawn: spawn_contact::<L>,
+        });
+        law_table.slots[a as usize * n + b as usize] = entry.clone();
+        law_table.slots[b as usize * n + a as usize] = entry;
+    }
+    sim.world.insert_resource(PairParams::<L>(table));
+    sim.world.insert_resource(LawChannels::<L> {
+        ids,
+        _law: std::marker::PhantomData,
+    });
+    sim.add_system(Stage::ContactForces, format!("law:{name}"), evaluate_law::<L>);
+}
+
+/// The laws a program knows, by name. The `talus` binary fills it from the plugin crates.
+#[derive(Default)]
+pub struct LawRegistry {
+    laws: Vec<Box<dyn LawDescriptor>>,
+}
+
+impl LawRegistry {
+    /// An empty registry.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Registers a law. A second law of the same name replaces the first.
+    pub fn register(&mut self, law: Box<dyn LawDescriptor>) -> &mut Self {
+        self.laws.retain(|l| l.name() != law.name());
+        self.laws.push(law);
+        self
+    }
+
+    /// Looks a law up by name.
+    pub fn get(&self, name: &str) -> Option<&dyn LawDescriptor> {
+        self.laws.iter().find(|l| l.name() == name).map(|b| b.as_ref())
+    }
+
+    /// Names of all registered laws.
+    pub fn names(&self) -> Vec<&'static str> {
+        self.laws.iter().map(|l| l.name()).collect()
+    }
+}

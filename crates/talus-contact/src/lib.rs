@@ -1,0 +1,19 @@
+//! Talus contacts: contact entities, contact kinematics, and the contact-law extension API.
+//!
+//! A contact entity lives while two bodies touch. It carries the pair ([`Contact`]),
+//! the geometry and force of the last evaluation, the energy it holds and dissipated,
+//! and the law's own per-contact history ([`LawState`]). The core never names a law:
+//! laws implement [`ContactLaw`] (the typed force routine) and [`LawDescriptor`]
+//! (parameters, validation and installation), and a scene picks them by name.
+
+pub mod components;
+pub mod kinematics;
+pub mod law;
+pub mod params;
+pub mod systems;
+
+pub use components::*;
+pub use kinematics::ContactKinematics;
+pub use law::*;
+pub use params::*;
+pub use systems::ContactPlugin;

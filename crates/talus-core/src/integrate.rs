@@ -1,0 +1,210 @@
+//! Time integration (velocity Verlet or symplectic Euler, for translation and
+//! rotation), gravity, kinetic energy and the health check.
+//!
+//! Both schemes are "kick, drift, force, kick" with different kick fractions:
+//! velocity Verlet kicks half a step on each side of the drift, symplectic Euler a
+//! whole step before it. Loops run over contiguous component slices with rayon.
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::components::*;
+use crate::energy::{EnergyLedger, EnergySnapshot};
+use crate::resources::{BlowUp, Clock, Health, SimConfig};
+
+/// Grains below this count are integrated on one thread: spawning tasks costs more.
+const PARALLEL_THRESHOLD: usize = 4096;
+
+/// Chunk length for the fixed-shape parallel reductions (results do not depend on threads).
+const REDUCTION_CHUNK: usize = 1024;
+
+/// First kick and drift: v += a·dt·F/m, then x += dt·v. Also accumulates the work of
+/// gravity over the drift, m g·Δx, which is exact for a uniform field.
+#[allow(clippy::type_complexity)]
+pub fn kick_drift_translation(
+    config: Res<SimConfig>,
+    clock: Res<Clock>,
+    mut ledger: ResMut<EnergyLedger>,
+    mut grains: Query<(&mut Position, &mut Velocity, &Force, &Mass), With<Grain>>,
+) {
+    let dt = clock.pass_dt;
+    if dt == 0.0 {
+        return;
+    }
+    let kick = config.integrator.kick_before_drift() * dt;
+    let g = config.gravity;
+    let mut gravity_work = 0.0;
+    for (mut p, mut v, f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        let p = p.bypass_change_detection();
+        let v = v.bypass_change_detection();
+        let update = |((p, v), (f, m)): ((&mut Position, &mut Velocity), (&Force, &Mass))| {
+            v.0 += f.0 * (kick / m.0);
+            let dx = v.0 * dt;
+            p.0 += dx;
+            m.0 * g.dot(dx)
+        };
+        gravity_work += if p.len() >= PARALLEL_THRESHOLD {
+            let partial: Vec<f64> = p
+                .par_chunks_mut(REDUCTION_CHUNK)
+                .zip(v.par_chunks_mut(REDUCTION_CHUNK))
+                .zip(f.par_chunks(REDUCTION_CHUNK).zip(m.par_chunks(REDUCTION_CHUNK)))
+                .map(|((p, v), (f, m))| {
+                    p.iter_mut()
+                        .zip(v.iter_mut())
+                        .zip(f.iter().zip(m.iter()))
+                        .map(update)
+                        .sum::<f64>()
+                })
+                .collect();
+            partial.iter().sum::<f64>()
+        } else {
+            p.iter_mut()
+                .zip(v.iter_mut())
+                .zip(f.iter().zip(m.iter()))
+                .map(update)
+                .sum::<f64>()
+        };
+    }
+    ledger.gravity_work += gravity_work;
+}
+
+/// First rotational kick: ω += a·dt·T/I (spheres need no orientation for contact physics).
+pub fn first_kick_rotation(
+    config: Res<SimConfig>,
+    clock: Res<Clock>,
+    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), With<Grain>>,
+) {
+    let kick = config.integrator.kick_before_drift() * clock.pass_dt;
+    rotation_kick(kick, grains);
+}
+
+/// Second rotational kick: ω += (1 − a)·dt·T/I.
+pub fn second_kick_rotation(
+    config: Res<SimConfig>,
+    clock: Res<Clock>,
+    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), With<Grain>>,
+) {
+    let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
+    rotation_kick(kick, grains);
+}
+
+fn rotation_kick(
+    kick: f64,
+    mut grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), With<Grain>>,
+) {
+    if kick == 0.0 {
+        return;
+    }
+    for (mut w, t, i) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        let w = w.bypass_change_detection();
+        let update = |(w, (t, i)): (&mut AngularVelocity, (&Torque, &MomentOfInertia))| {
+            w.0 += t.0 * (kick / i.0);
+        };
+        if w.len() >= PARALLEL_THRESHOLD {
+            w.par_iter_mut().zip(t.par_iter().zip(i.par_iter())).for_each(update);
+        } else {
+            w.iter_mut().zip(t.iter().zip(i.iter())).for_each(update);
+        }
+    }
+}
+
+/// Second kick: v += (1 − a)·dt·F/m with the forces of the new positions.
+pub fn second_kick_translation(
+    config: Res<SimConfig>,
+    clock: Res<Clock>,
+    mut grains: Query<(&mut Velocity, &Force, &Mass), With<Grain>>,
+) {
+    let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
+    if kick == 0.0 {
+        return;
+    }
+    for (mut v, f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        let v = v.bypass_change_detection();
+        let update = |(v, (f, m)): (&mut Velocity, (&Force, &Mass))| v.0 += f.0 * (kick / m.0);
+        if v.len() >= PARALLEL_THRESHOLD {
+            v.par_iter_mut().zip(f.par_iter().zip(m.par_iter())).for_each(update);
+        } else {
+            v.iter_mut().zip(f.iter().zip(m.iter())).for_each(update);
+        }
+    }
+}
+
+/// Adds m·g to every grain's force (the contact stage has already overwritten it).
+pub fn gravity(config: Res<SimConfig>, mut grains: Query<(&mut Force, &Mass), With<Grain>>) {
+    let g = config.gravity;
+    for (mut f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        for (f, m) in f.bypass_change_detection().iter_mut().zip(m.iter()) {
+            f.0 += g * m.0;
+        }
+    }
+}
+
+/// Prescribed wall motion: point += dt · velocity.
+pub fn move_walls(clock: Res<Clock>, mut walls: Query<&mut Wall>) {
+    let dt = clock.pass_dt;
+    for mut wall in &mut walls {
+        if wall.velocity != DVec3::ZERO {
+            let v = wall.velocity;
+            wall.point += v * dt;
+        }
+    }
+}
+
+/// Translational and rotational kinetic energy of the grains.
+pub fn kinetic_energy(
+    mut energy: ResMut<EnergySnapshot>,
+    grains: Query<(&Velocity, &AngularVelocity, &Mass, &MomentOfInertia), With<Grain>>,
+) {
+    let mut translational = 0.0;
+    let mut rotational = 0.0;
+    for (v, w, m, i) in grains.contiguous_iter().expect("grain query is dense") {
+        for k in 0..v.len() {
+            translational += 0.5 * m[k].0 * v[k].0.length_squared();
+            rotational += 0.5 * i[k].0 * w[k].0.length_squared();
+        }
+    }
+    energy.translational_kinetic = translational;
+    energy.rotational_kinetic = rotational;
+}
+
+/// Stops the run on a non-finite position, velocity or force, or on an overlap beyond
+/// the bound in [`Health`].
+pub fn health_check(
+    clock: Res<Clock>,
+    energy: Res<EnergySnapshot>,
+    mut health: ResMut<Health>,
+    grains: Query<(Entity, &Position, &Velocity, &Force), With<Grain>>,
+) {
+    if health.blow_up.is_some() {
+        return;
+    }
+    let finite = energy.translational_kinetic.is_finite() && energy.rotational_kinetic.is_finite();
+    if !finite {
+        let bad: Vec<Entity> = grains
+            .iter()
+            .filter(|(_, p, v, f)| !(p.0.is_finite() && v.0.is_finite() && f.0.is_finite()))
+            .map(|(e, ..)| e)
+            .take(16)
+            .collect();
+        health.blow_up = Some(BlowUp {
+            step: clock.step,
+            reason: "a position, velocity or force became NaN or infinite".into(),
+            entities: bad,
+        });
+        return;
+    }
+    if energy.max_overlap_ratio > health.max_overlap_ratio {
+        health.blow_up = Some(BlowUp {
+            step: clock.step,
+            reason: format!(
+                "overlap / radius reached {:.4}, above the bound {} (time step too large or contact too soft?)",
+                energy.max_overlap_ratio, health.max_overlap_ratio
+            ),
+            entities: energy
+                .worst_overlap_pair
+                .map(|(a, b)| vec![a, b])
+                .unwrap_or_default(),
+        });
+    }
+}

@@ -1,0 +1,144 @@
+//! Resources every step reads: configuration, clock, materials, per-stage timings.
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+/// Spatial dimension of a simulation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum Dimension {
+    /// Disks in the xy-plane, rotating about z only.
+    Two,
+    /// Spheres in space.
+    #[default]
+    Three,
+}
+
+impl Dimension {
+    /// 2 or 3.
+    pub fn as_number(self) -> u8 {
+        match self {
+            Dimension::Two => 2,
+            Dimension::Three => 3,
+        }
+    }
+}
+
+/// Time integration scheme for translation and rotation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum Integrator {
+    /// Velocity Verlet (kick–drift–kick), second order, symplectic. The default.
+    #[default]
+    VelocityVerlet,
+    /// Symplectic (semi-implicit) Euler: kick then drift, first order.
+    SymplecticEuler,
+}
+
+impl Integrator {
+    /// Fraction of the velocity update done before the drift; the rest is done
+    /// after the new forces are known.
+    pub fn kick_before_drift(self) -> f64 {
+        match self {
+            Integrator::VelocityVerlet => 0.5,
+            Integrator::SymplecticEuler => 1.0,
+        }
+    }
+}
+
+/// Global configuration of a simulation, fixed when it is built.
+#[derive(Resource, Clone, Debug)]
+pub struct SimConfig {
+    /// 2-D or 3-D.
+    pub dimension: Dimension,
+    /// Time step, seconds.
+    pub dt: f64,
+    /// Gravitational acceleration, m/s².
+    pub gravity: DVec3,
+    /// Integration scheme.
+    pub integrator: Integrator,
+    /// Whether grain rotation is integrated (true only when some law can torque a grain).
+    pub rotation: bool,
+}
+
+/// The simulation clock.
+#[derive(Resource, Clone, Copy, Debug, Default)]
+pub struct Clock {
+    /// Steps completed.
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub time: f64,
+    /// Time advanced by the pass being run: `dt` during a step, 0 during the priming
+    /// pass that evaluates the initial forces (so history and energy do not move).
+    pub pass_dt: f64,
+}
+
+/// A material: what the core needs to know (density); contact laws read their own
+/// per-material parameters, resolved per material pair when the simulation is built.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name used in scene files.
+    pub name: String,
+    /// Density, kg/m³.
+    pub density: f64,
+}
+
+/// All materials of a scene; [`crate::components::MaterialId`] indexes it.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct Materials(pub Vec<Material>);
+
+impl Materials {
+    /// Number of materials.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    /// Whether there is no material.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// Index of the dense material-pair table for materials `a` and `b` (symmetric).
+    pub fn pair_index(&self, a: u16, b: u16) -> usize {
+        let (lo, hi) = if a <= b { (a, b) } else { (b, a) };
+        lo as usize * self.0.len() + hi as usize
+    }
+}
+
+/// Wall-clock time spent in each stage so far, seconds.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct StageTimings {
+    /// Accumulated seconds per stage, in stage order.
+    pub seconds: Vec<(crate::schedule::Stage, f64)>,
+    pub(crate) last_mark: Option<(crate::schedule::Stage, std::time::Instant)>,
+}
+
+impl StageTimings {
+    /// Accumulated seconds for one stage.
+    pub fn get(&self, stage: crate::schedule::Stage) -> f64 {
+        self.seconds
+            .iter()
+            .find(|(s, _)| *s == stage)
+            .map(|(_, t)| *t)
+            .unwrap_or(0.0)
+    }
+}
+
+/// A run stopped because the state became unphysical.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BlowUp {
+    /// Step at which the problem was found.
+    pub step: u64,
+    /// What exceeded which bound.
+    pub reason: String,
+    /// Entities involved (grains, and for contacts the two bodies).
+    pub entities: Vec<Entity>,
+}
+
+/// Set by a safety check when the run must stop; the driver stops and reports it.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct Health {
+    /// The first problem found, if any.
+    pub blow_up: Option<BlowUp>,
+    /// Largest overlap / radius allowed before a run is stopped. Default: 0.5.
+    pub max_overlap_ratio: f64,
+}

@@ -1,0 +1,361 @@
+//! The staged step schedule, the plugin trait, and the simulation driver.
+//!
+//! A step is one bevy [`Schedule`] whose systems sit in named, chained stages
+//! ([`Stage`]). Plugins add systems to stages through [`SimBuilder`]; only the
+//! plugins a scene names are built, so an effect a scene does not ask for costs nothing.
+
+use std::time::Instant;
+
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::{ScheduleLabel, SingleThreadedExecutor};
+use bevy_ecs::system::ScheduleSystem;
+
+use crate::energy::{DissipationChannels, EnergyLedger, EnergySnapshot};
+use crate::integrate;
+use crate::resources::{BlowUp, Clock, Health, SimConfig, StageTimings};
+use crate::snapshot::{self, GrainSnapshot};
+
+/// The stages of one time step, run in this order.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Stage {
+    /// Per-step preparation (prescribed motions, bookkeeping).
+    Prepare,
+    /// First velocity kick and position drift; walls move.
+    IntegratePositions,
+    /// Dense snapshot of the grains and candidate pairs from the cell grid.
+    BroadPhase,
+    /// Exact overlap tests; contact entities created and removed.
+    NarrowPhase,
+    /// Contact laws compute forces and torques for every contact.
+    ContactForces,
+    /// Contact forces are summed onto grains and walls.
+    ApplyContactForces,
+    /// Body forces such as gravity.
+    BodyForces,
+    /// Second velocity kick.
+    IntegrateVelocities,
+    /// Energies and health checks.
+    Sample,
+    /// Recordings and reports.
+    Export,
+}
+
+impl Stage {
+    /// All stages in execution order.
+    pub const ALL: [Stage; 10] = [
+        Stage::Prepare,
+        Stage::IntegratePositions,
+        Stage::BroadPhase,
+        Stage::NarrowPhase,
+        Stage::ContactForces,
+        Stage::ApplyContactForces,
+        Stage::BodyForces,
+        Stage::IntegrateVelocities,
+        Stage::Sample,
+        Stage::Export,
+    ];
+
+    /// Snake-case name used in reports and plans.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Prepare => "prepare",
+            Stage::IntegratePositions => "integrate_positions",
+            Stage::BroadPhase => "broad_phase",
+            Stage::NarrowPhase => "narrow_phase",
+            Stage::ContactForces => "contact_forces",
+            Stage::ApplyContactForces => "apply_contact_forces",
+            Stage::BodyForces => "body_forces",
+            Stage::IntegrateVelocities => "integrate_velocities",
+            Stage::Sample => "sample",
+            Stage::Export => "export",
+        }
+    }
+}
+
+/// One ordering slot inside a stage: systems of a stage run in the order they were added.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+struct Slot(Stage, u16);
+
+/// Label of the step schedule.
+#[derive(ScheduleLabel, Debug, Clone, PartialEq, Eq, Hash)]
+pub struct StepSchedule;
+
+/// What a built simulation will run: shown by `talus check`.
+#[derive(Clone, Debug, Default)]
+pub struct Plan {
+    /// Systems of each stage, in execution order.
+    pub stages: Vec<(Stage, Vec<String>)>,
+    /// Plugins built, in build order.
+    pub plugins: Vec<String>,
+    /// Free-form lines: time step and how it was chosen, rotation on or off, and so on.
+    pub notes: Vec<String>,
+}
+
+/// A unit of functionality a scene can name: it adds systems and resources.
+pub trait Plugin {
+    /// Name shown in the plan.
+    fn name(&self) -> String;
+    /// Adds this plugin's systems and resources.
+    fn build(&self, sim: &mut SimBuilder);
+}
+
+/// Assembles a [`Simulation`]: a world, the step schedule, and the plan.
+pub struct SimBuilder {
+    /// The world under construction; spawn grains and walls here.
+    pub world: World,
+    schedule: Schedule,
+    plan: Plan,
+}
+
+impl SimBuilder {
+    /// A builder with the core resources and the core systems (integration, snapshot,
+    /// gravity, energy sampling) installed.
+    pub fn new(config: SimConfig) -> Self {
+        let mut world = World::new();
+        world.insert_resource(Clock::default());
+        world.insert_resource(StageTimings::default());
+        world.insert_resource(Health {
+            blow_up: None,
+            max_overlap_ratio: 0.5,
+        });
+        world.insert_resource(DissipationChannels::default());
+        world.insert_resource(EnergyLedger::default());
+        world.insert_resource(EnergySnapshot::default());
+        world.insert_resource(GrainSnapshot::default());
+        let rotation = config.rotation;
+        let gravity_on = config.gravity != glam::DVec3::ZERO;
+        world.insert_resource(config);
+
+        let mut schedule = Schedule::new(StepSchedule);
+        schedule.set_executor(SingleThreadedExecutor::default());
+        schedule.configure_sets(
+            (
+                Stage::Prepare,
+                Stage::IntegratePositions,
+                Stage::BroadPhase,
+                Stage::NarrowPhase,
+                Stage::ContactForces,
+                Stage::ApplyContactForces,
+                Stage::BodyForces,
+                Stage::IntegrateVelocities,
+                Stage::Sample,
+                Stage::Export,
+            )
+                .chain(),
+        );
+        let mut builder = Self {
+            world,
+            schedule,
+            plan: Plan {
+                stages: Stage::ALL.iter().map(|s| (*s, Vec::new())).collect(),
+                ..Plan::default()
+            },
+        };
+        for stage in Stage::ALL {
+            builder.add_hidden(stage, mark_stage(stage));
+        }
+        builder.add_system(
+            Stage::IntegratePositions,
+            "kick_drift_translation",
+            integrate::kick_drift_translation,
+        );
+        if rotation {
+            builder.add_system(
+                Stage::IntegratePositions,
+                "kick_rotation",
+                integrate::first_kick_rotation,
+            );
+        }
+        builder.add_system(Stage::IntegratePositions, "move_walls", integrate::move_walls);
+        builder.add_system(Stage::BroadPhase, "gather_snapshot", snapshot::gather_snapshot);
+        if gravity_on {
+            builder.add_system(Stage::BodyForces, "gravity", integrate::gravity);
+        }
+        builder.add_system(
+            Stage::IntegrateVelocities,
+            "kick_translation",
+            integrate::second_kick_translation,
+        );
+        if rotation {
+            builder.add_system(
+                Stage::IntegrateVelocities,
+                "kick_rotation",
+                integrate::second_kick_rotation,
+            );
+        }
+        builder.add_system(Stage::Sample, "kinetic_energy", integrate::kinetic_energy);
+        builder.add_system(Stage::Sample, "health_check", integrate::health_check);
+        builder
+    }
+
+    /// Adds a system at the end of a stage, under a name shown in the plan.
+    pub fn add_system<M>(
+        &mut self,
+        stage: Stage,
+        name: impl Into<String>,
+        system: impl IntoScheduleConfigs<ScheduleSystem, M>,
+    ) -> &mut Self {
+        self.add_hidden(stage, system);
+        let entry = self
+            .plan
+            .stages
+            .iter_mut()
+            .find(|(s, _)| *s == stage)
+            .expect("every stage has a plan entry");
+        entry.1.push(name.into());
+        self
+    }
+
+    fn add_hidden<M>(&mut self, stage: Stage, system: impl IntoScheduleConfigs<ScheduleSystem, M>) {
+        let count = self.slot_count(stage);
+        let slot = Slot(stage, count);
+        if count == 0 {
+            self.schedule.configure_sets(slot.in_set(stage));
+        } else {
+            self.schedule
+                .configure_sets(slot.in_set(stage).after(Slot(stage, count - 1)));
+        }
+        self.schedule.add_systems(system.in_set(slot));
+        self.slot_counts_mut(stage);
+    }
+
+    fn slot_count(&mut self, stage: Stage) -> u16 {
+        let counts = self
+            .world
+            .get_resource_or_insert_with(SlotCounts::default);
+        counts.0[stage as usize]
+    }
+
+    fn slot_counts_mut(&mut self, stage: Stage) {
+        let mut counts = self.world.resource_mut::<SlotCounts>();
+        counts.0[stage as usize] += 1;
+    }
+
+    /// Builds a plugin and records its name in the plan.
+    pub fn add_plugin(&mut self, plugin: &dyn Plugin) -> &mut Self {
+        self.plan.plugins.push(plugin.name());
+        plugin.build(self);
+        self
+    }
+
+    /// Adds a line to the plan (time step, reasons, options).
+    pub fn note(&mut self, line: impl Into<String>) -> &mut Self {
+        self.plan.notes.push(line.into());
+        self
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SimConfig {
+        self.world.resource::<SimConfig>()
+    }
+
+    /// The plan as it stands.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
+    /// Finishes the simulation. Initial forces are evaluated on the first step call.
+    pub fn build(mut self) -> Simulation {
+        self.world.remove_resource::<SlotCounts>();
+        Simulation {
+            world: self.world,
+            schedule: self.schedule,
+            plan: self.plan,
+            primed: false,
+        }
+    }
+}
+
+#[derive(Resource, Default)]
+struct SlotCounts([u16; 10]);
+
+fn mark_stage(stage: Stage) -> impl FnMut(ResMut<StageTimings>) {
+    move |mut timings: ResMut<StageTimings>| {
+        let now = Instant::now();
+        timings.close_mark(now);
+        timings.last_mark = Some((stage, now));
+    }
+}
+
+impl StageTimings {
+    fn close_mark(&mut self, now: Instant) {
+        if let Some((stage, start)) = self.last_mark.take() {
+            let elapsed = (now - start).as_secs_f64();
+            match self.seconds.iter_mut().find(|(s, _)| *s == stage) {
+                Some(entry) => entry.1 += elapsed,
+                None => self.seconds.push((stage, elapsed)),
+            }
+        }
+    }
+}
+
+/// A built simulation: call [`Simulation::step`] to advance it.
+pub struct Simulation {
+    /// The world: grains, walls, contacts and resources.
+    pub world: World,
+    schedule: Schedule,
+    /// What runs in each stage.
+    pub plan: Plan,
+    primed: bool,
+}
+
+impl Simulation {
+    /// Evaluates the forces of the initial state without moving anything (a pass with
+    /// zero time advance), so that the first velocity kick uses them. Idempotent.
+    pub fn prime(&mut self) -> Result<(), BlowUp> {
+        if self.primed {
+            return Ok(());
+        }
+        self.primed = true;
+        self.world.resource_mut::<Clock>().pass_dt = 0.0;
+        self.run_pass()
+    }
+
+    /// Advances one time step.
+    pub fn step(&mut self) -> Result<(), BlowUp> {
+        self.prime()?;
+        let dt = self.world.resource::<SimConfig>().dt;
+        {
+            let mut clock = self.world.resource_mut::<Clock>();
+            clock.pass_dt = dt;
+            clock.step += 1;
+            // Multiply rather than accumulate so that simulated time carries no round-off drift.
+            clock.time = clock.step as f64 * dt;
+        }
+        self.run_pass()
+    }
+
+    /// Advances `n` steps, stopping at the first blow-up.
+    pub fn run_steps(&mut self, n: u64) -> Result<(), BlowUp> {
+        for _ in 0..n {
+            self.step()?;
+        }
+        Ok(())
+    }
+
+    fn run_pass(&mut self) -> Result<(), BlowUp> {
+        self.schedule.run(&mut self.world);
+        self.world
+            .resource_mut::<StageTimings>()
+            .close_mark(Instant::now());
+        match self.world.resource::<Health>().blow_up.clone() {
+            Some(b) => Err(b),
+            None => Ok(()),
+        }
+    }
+
+    /// Steps completed.
+    pub fn step_count(&self) -> u64 {
+        self.world.resource::<Clock>().step
+    }
+
+    /// Simulated time, seconds.
+    pub fn time(&self) -> f64 {
+        self.world.resource::<Clock>().time
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SimConfig {
+        self.world.resource::<SimConfig>()
+    }
+}

@@ -1,0 +1,134 @@
+//! The dense per-step snapshot of grains and walls that the hot loops read.
+//!
+//! Grain entities stay the source of truth; at the start of the broad phase their
+//! state is copied, in table order, into flat arrays. Collision detection and contact
+//! laws index those arrays, never the world, so the force loop needs neither hashing nor
+//! entity look-ups. (A subdomain's ghost grains would be appended here.)
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+
+use crate::components::*;
+
+/// Marker for "no dense index".
+pub const NO_INDEX: u32 = u32::MAX;
+
+/// A wall as the hot loops see it.
+#[derive(Clone, Copy, Debug)]
+pub struct WallState {
+    /// The wall entity.
+    pub entity: Entity,
+    /// A point on the plane.
+    pub point: DVec3,
+    /// Unit outward normal.
+    pub normal: DVec3,
+    /// Prescribed velocity.
+    pub velocity: DVec3,
+    /// Material id.
+    pub material: u16,
+}
+
+/// Dense arrays of grain and wall state for the current step.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct GrainSnapshot {
+    /// Grain entities, in dense order.
+    pub entity: Vec<Entity>,
+    /// Centre positions.
+    pub position: Vec<DVec3>,
+    /// Velocities (half-step velocities under velocity Verlet).
+    pub velocity: Vec<DVec3>,
+    /// Angular velocities.
+    pub omega: Vec<DVec3>,
+    /// Radii.
+    pub radius: Vec<f64>,
+    /// Masses.
+    pub mass: Vec<f64>,
+    /// Material ids.
+    pub material: Vec<u16>,
+    /// Dense index of each grain, indexed by `Entity::index_u32()`; [`NO_INDEX`] elsewhere.
+    pub dense_of: Vec<u32>,
+    /// Walls.
+    pub walls: Vec<WallState>,
+    /// Largest grain radius.
+    pub max_radius: f64,
+}
+
+impl GrainSnapshot {
+    /// Number of grains.
+    pub fn len(&self) -> usize {
+        self.entity.len()
+    }
+
+    /// Whether there are no grains.
+    pub fn is_empty(&self) -> bool {
+        self.entity.is_empty()
+    }
+
+    /// Dense index of a grain entity, if it is in the snapshot.
+    #[inline]
+    pub fn dense(&self, entity: Entity) -> Option<usize> {
+        let i = *self.dense_of.get(entity.index_u32() as usize)?;
+        (i != NO_INDEX && self.entity[i as usize] == entity).then_some(i as usize)
+    }
+
+    /// Index of a wall entity in [`GrainSnapshot::walls`].
+    pub fn wall_index(&self, entity: Entity) -> Option<usize> {
+        self.walls.iter().position(|w| w.entity == entity)
+    }
+}
+
+/// Copies grain and wall state into the snapshot, reusing its allocations.
+#[allow(clippy::type_complexity)]
+pub fn gather_snapshot(
+    mut snapshot: ResMut<GrainSnapshot>,
+    grains: Query<
+        (
+            Entity,
+            &Position,
+            &Velocity,
+            &AngularVelocity,
+            &Radius,
+            &Mass,
+            &MaterialId,
+        ),
+        With<Grain>,
+    >,
+    walls: Query<(Entity, &Wall)>,
+) {
+    let s = &mut *snapshot;
+    s.entity.clear();
+    s.position.clear();
+    s.velocity.clear();
+    s.omega.clear();
+    s.radius.clear();
+    s.mass.clear();
+    s.material.clear();
+    s.max_radius = 0.0;
+    for (e, p, v, w, r, m, mat) in grains.contiguous_iter().expect("grain query is dense") {
+        s.entity.extend_from_slice(e);
+        s.position.extend(p.iter().map(|x| x.0));
+        s.velocity.extend(v.iter().map(|x| x.0));
+        s.omega.extend(w.iter().map(|x| x.0));
+        s.radius.extend(r.iter().map(|x| x.0));
+        s.mass.extend(m.iter().map(|x| x.0));
+        s.material.extend(mat.iter().map(|x| x.0));
+    }
+    s.max_radius = s.radius.iter().copied().fold(0.0, f64::max);
+    let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
+    if s.dense_of.len() <= max_index {
+        s.dense_of.resize(max_index + 1, NO_INDEX);
+    }
+    for (i, e) in s.entity.iter().enumerate() {
+        s.dense_of[e.index_u32() as usize] = i as u32;
+    }
+    s.walls.clear();
+    for (entity, wall) in &walls {
+        s.walls.push(WallState {
+            entity,
+            point: wall.point,
+            normal: wall.normal,
+            velocity: wall.velocity,
+            material: wall.material.0,
+        });
+    }
+}

@@ -1,0 +1,395 @@
+//! The export system: logs grains, force chains, walls and energy statistics of one
+//! step into the recording.
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use rerun::{EntityPath, EntityPathPart};
+use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind};
+use talus_core::prelude::*;
+
+use crate::{
+    FORCE_CHAINS_PATH, GRAINS_PATH, RerunRecorder, STATS_PATH, STEP_TIMELINE, TIME_TIMELINE,
+    WALLS_PATH,
+};
+
+/// Smallest force-chain radius, as a fraction of the mean grain radius.
+const MIN_CHAIN_RADIUS: f32 = 0.02;
+/// Force-chain radius at the largest normal force, as a fraction of the mean grain radius.
+const MAX_CHAIN_RADIUS: f32 = 0.5;
+
+/// How a wall is recorded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum WallMode {
+    /// At rest at its first export: logged once, statically.
+    Static,
+    /// Moving at its first export: logged every frame.
+    Moving,
+}
+
+/// Per-recording state kept between frames; scratch buffers are reused so that a
+/// frame allocates only what the rerun serialisation itself needs.
+#[derive(Default)]
+pub(crate) struct ExportState {
+    view_logged: bool,
+    walls: Vec<(Entity, EntityPath, WallMode)>,
+    stats_paths: Vec<EntityPath>,
+    dissipated_paths: Vec<EntityPath>,
+    positions: Vec<[f32; 3]>,
+    radii: Vec<f32>,
+    speeds: Vec<f64>,
+    colors: Vec<rerun::Color>,
+    strips: Vec<[[f32; 3]; 2]>,
+    normal_forces: Vec<f64>,
+    strip_radii: Vec<f32>,
+}
+
+/// Fixed scalar statistics, in the order of [`ExportState::stats_paths`].
+const STATS: [&str; 7] = [
+    "translational_kinetic",
+    "rotational_kinetic",
+    "elastic",
+    "gravity_work",
+    "wall_work",
+    "contacts",
+    "max_overlap_ratio",
+];
+
+/// The [`crate::RerunExportPlugin`] system, in [`Stage::Export`]: when a
+/// [`RerunRecorder`] exists and `clock.step` is a multiple of its period, logs one frame.
+/// A logging error is kept in the recorder (see [`RerunRecorder::error`]), never panics.
+#[allow(clippy::too_many_arguments)]
+pub fn rerun_export(
+    clock: Res<Clock>,
+    config: Res<SimConfig>,
+    energy: Res<EnergySnapshot>,
+    ledger: Res<EnergyLedger>,
+    channels: Res<DissipationChannels>,
+    recorder: Option<ResMut<RerunRecorder>>,
+    grains: Query<(&Position, &Velocity, &Radius), With<Grain>>,
+    contacts: Query<(&Contact, &ContactGeometry, &ContactForce)>,
+    walls: Query<(Entity, &Wall)>,
+) {
+    let Some(mut recorder) = recorder else {
+        return;
+    };
+    if !clock.step.is_multiple_of(recorder.every) {
+        return;
+    }
+    let recorder = &mut *recorder;
+    let result = log_frame(
+        &recorder.stream,
+        &mut recorder.state,
+        &clock,
+        &config,
+        &grains,
+        &contacts,
+        &walls,
+    )
+    .and(log_stats(
+        &recorder.stream,
+        &mut recorder.state,
+        &energy,
+        &ledger,
+        &channels,
+    ));
+    recorder.frames += 1;
+    if let Err(e) = result
+        && recorder.error.is_none()
+    {
+        recorder.error = Some(format!("rerun export at step {}: {e}", clock.step));
+    }
+}
+
+/// Axis-aligned bounding box of the grains, and radius statistics.
+struct Extent {
+    lo: DVec3,
+    hi: DVec3,
+    mean_radius: f64,
+    max_radius: f64,
+}
+
+/// Sets the timelines and logs the view coordinates (once), grains, force chains and walls.
+fn log_frame(
+    rec: &rerun::RecordingStream,
+    s: &mut ExportState,
+    clock: &Clock,
+    config: &SimConfig,
+    grains: &Query<(&Position, &Velocity, &Radius), With<Grain>>,
+    contacts: &Query<(&Contact, &ContactGeometry, &ContactForce)>,
+    walls: &Query<(Entity, &Wall)>,
+) -> rerun::RecordingStreamResult<()> {
+    // Timelines are thread-local to the stream; set them right before logging.
+    rec.set_time_sequence(STEP_TIMELINE, clock.step as i64);
+    rec.set_duration_secs(TIME_TIMELINE, clock.time);
+    if !s.view_logged {
+        let g = config.gravity;
+        let view = if config.dimension == Dimension::Two || g.y.abs() > g.z.abs() {
+            rerun::ViewCoordinates::RIGHT_HAND_Y_UP()
+        } else {
+            rerun::ViewCoordinates::RIGHT_HAND_Z_UP()
+        };
+        rec.log_static(EntityPath::root(), &view)?;
+        s.view_logged = true;
+    }
+    let extent = log_grains(rec, s, grains)?;
+    log_force_chains(rec, s, &extent, grains, contacts)?;
+    log_walls(rec, s, &extent, config.dimension == Dimension::Two, walls)
+}
+
+fn log_grains(
+    rec: &rerun::RecordingStream,
+    s: &mut ExportState,
+    grains: &Query<(&Position, &Velocity, &Radius), With<Grain>>,
+) -> rerun::RecordingStreamResult<Extent> {
+    s.positions.clear();
+    s.radii.clear();
+    s.speeds.clear();
+    s.colors.clear();
+    let mut lo = DVec3::INFINITY;
+    let mut hi = DVec3::NEG_INFINITY;
+    let mut sum_radius = 0.0;
+    let mut max_radius = 0.0f64;
+    let mut max_speed = 0.0f64;
+    for (p, v, r) in grains.iter() {
+        s.positions.push(to_f32(p.0));
+        s.radii.push(r.0 as f32);
+        let speed = v.0.length();
+        s.speeds.push(speed);
+        max_speed = max_speed.max(speed);
+        lo = lo.min(p.0 - DVec3::splat(r.0));
+        hi = hi.max(p.0 + DVec3::splat(r.0));
+        sum_radius += r.0;
+        max_radius = max_radius.max(r.0);
+    }
+    let n = s.positions.len();
+    s.colors
+        .extend(s.speeds.iter().map(|&v| ramp(fraction(v, max_speed))));
+    rec.log(
+        GRAINS_PATH,
+        &rerun::Points3D::new(s.positions.iter().copied())
+            .with_radii(s.radii.iter().copied())
+            .with_colors(s.colors.iter().copied()),
+    )?;
+    Ok(if n == 0 {
+        Extent {
+            lo: DVec3::splat(-0.5),
+            hi: DVec3::splat(0.5),
+            mean_radius: 0.0,
+            max_radius: 0.0,
+        }
+    } else {
+        Extent {
+            lo,
+            hi,
+            mean_radius: sum_radius / n as f64,
+            max_radius,
+        }
+    })
+}
+
+fn log_force_chains(
+    rec: &rerun::RecordingStream,
+    s: &mut ExportState,
+    extent: &Extent,
+    grains: &Query<(&Position, &Velocity, &Radius), With<Grain>>,
+    contacts: &Query<(&Contact, &ContactGeometry, &ContactForce)>,
+) -> rerun::RecordingStreamResult<()> {
+    s.strips.clear();
+    s.normal_forces.clear();
+    s.strip_radii.clear();
+    s.colors.clear();
+    let mut max_force = 0.0f64;
+    for (c, g, f) in contacts.iter() {
+        // A contact's grain is always alive; fall back on the contact point anyway so
+        // that every contact gets its strip.
+        let centre = |e: Entity| grains.get(e).map_or(g.point, |(p, _, _)| p.0);
+        let start = centre(c.a);
+        let end = match c.kind {
+            ContactKind::GrainGrain => centre(c.b),
+            ContactKind::GrainWall => g.point,
+        };
+        s.strips.push([to_f32(start), to_f32(end)]);
+        let normal_force = f.force.dot(g.normal).abs();
+        max_force = max_force.max(normal_force);
+        s.normal_forces.push(normal_force);
+    }
+    let r_mean = extent.mean_radius as f32;
+    for &normal_force in &s.normal_forces {
+        let t = fraction(normal_force, max_force);
+        s.strip_radii
+            .push(r_mean * (MAX_CHAIN_RADIUS * t as f32).max(MIN_CHAIN_RADIUS));
+        s.colors.push(ramp(t));
+    }
+    rec.log(
+        FORCE_CHAINS_PATH,
+        &rerun::LineStrips3D::new(s.strips.iter().copied())
+            .with_radii(s.strip_radii.iter().copied())
+            .with_colors(s.colors.iter().copied()),
+    )
+}
+
+fn log_walls(
+    rec: &rerun::RecordingStream,
+    s: &mut ExportState,
+    extent: &Extent,
+    planar: bool,
+    walls: &Query<(Entity, &Wall)>,
+) -> rerun::RecordingStreamResult<()> {
+    let centre = 0.5 * (extent.lo + extent.hi);
+    let half = 0.5 * (extent.hi - extent.lo).length() + 2.0 * extent.max_radius;
+    for (entity, wall) in walls.iter() {
+        let known = s.walls.iter().position(|(e, _, _)| *e == entity);
+        let first = known.is_none();
+        let index = known.unwrap_or_else(|| {
+            let mode = if wall.velocity == DVec3::ZERO {
+                WallMode::Static
+            } else {
+                WallMode::Moving
+            };
+            let path = EntityPath::new(vec![
+                EntityPathPart::from(WALLS_PATH),
+                EntityPathPart::new(wall.name.as_str()),
+            ]);
+            s.walls.push((entity, path, mode));
+            s.walls.len() - 1
+        });
+        let (_, path, mode) = &s.walls[index];
+        if *mode == WallMode::Static && !first {
+            continue;
+        }
+        let outline = wall_outline(wall, centre, half, planar);
+        let strips = rerun::LineStrips3D::new([outline])
+            .with_radii([(0.05 * extent.mean_radius).max(1e-4) as f32])
+            .with_colors([rerun::Color::from_rgb(160, 160, 160)]);
+        match mode {
+            WallMode::Static => rec.log_static(path.clone(), &strips)?,
+            WallMode::Moving => rec.log(path.clone(), &strips)?,
+        }
+    }
+    Ok(())
+}
+
+/// Logs the energy statistics as scalars under `stats/`.
+fn log_stats(
+    rec: &rerun::RecordingStream,
+    s: &mut ExportState,
+    energy: &EnergySnapshot,
+    ledger: &EnergyLedger,
+    channels: &DissipationChannels,
+) -> rerun::RecordingStreamResult<()> {
+    if s.stats_paths.is_empty() {
+        s.stats_paths = STATS
+            .iter()
+            .map(|name| EntityPath::new(vec![STATS_PATH.into(), (*name).into()]))
+            .collect();
+    }
+    let names = &channels.names;
+    if s.dissipated_paths.len() != names.len() {
+        s.dissipated_paths = names
+            .iter()
+            .map(|name| {
+                EntityPath::new(vec![
+                    STATS_PATH.into(),
+                    "dissipated".into(),
+                    EntityPathPart::new(name.as_str()),
+                ])
+            })
+            .collect();
+    }
+    let values = [
+        energy.translational_kinetic,
+        energy.rotational_kinetic,
+        energy.elastic,
+        ledger.gravity_work,
+        ledger.wall_work,
+        energy.contacts as f64,
+        energy.max_overlap_ratio,
+    ];
+    for (path, value) in s.stats_paths.iter().zip(values) {
+        rec.log(path.clone(), &rerun::Scalars::single(value))?;
+    }
+    for (i, path) in s.dissipated_paths.iter().enumerate() {
+        let value = ledger.dissipated.get(i).copied().unwrap_or(0.0);
+        rec.log(path.clone(), &rerun::Scalars::single(value))?;
+    }
+    Ok(())
+}
+
+/// Closed outline of a wall: a square of half-side `half` in its plane (3-D), or a
+/// segment of half-length `half` along its trace in the xy-plane (2-D), centred on the
+/// projection of `centre` onto the plane.
+fn wall_outline(wall: &Wall, centre: DVec3, half: f64, planar: bool) -> Vec<[f32; 3]> {
+    let n = wall.normal.normalize_or(DVec3::Z);
+    let c = centre - (centre - wall.point).dot(n) * n;
+    if planar {
+        let t = DVec3::Z.cross(n).normalize_or(DVec3::X);
+        return vec![to_f32(c - half * t), to_f32(c + half * t)];
+    }
+    let (u, v) = n.any_orthonormal_pair();
+    let corners = [
+        c + half * (u + v),
+        c + half * (-u + v),
+        c + half * (-u - v),
+        c + half * (u - v),
+        c + half * (u + v),
+    ];
+    corners.iter().map(|&p| to_f32(p)).collect()
+}
+
+/// `value / max` in [0, 1]; 0 when `max` is 0.
+fn fraction(value: f64, max: f64) -> f64 {
+    if max > 0.0 {
+        (value / max).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// Blue → grey → red diverging ramp ("cool–warm") at `t` in [0, 1].
+fn ramp(t: f64) -> rerun::Color {
+    const BLUE: [f64; 3] = [59.0, 76.0, 192.0];
+    const GREY: [f64; 3] = [221.0, 221.0, 221.0];
+    const RED: [f64; 3] = [180.0, 4.0, 38.0];
+    let (a, b, u) = if t < 0.5 {
+        (BLUE, GREY, 2.0 * t)
+    } else {
+        (GREY, RED, 2.0 * t - 1.0)
+    };
+    let c = |k: usize| (a[k] + (b[k] - a[k]) * u).round().clamp(0.0, 255.0) as u8;
+    rerun::Color::from_rgb(c(0), c(1), c(2))
+}
+
+fn to_f32(v: DVec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ramp_ends_are_blue_and_red() {
+        assert_eq!(ramp(0.0), rerun::Color::from_rgb(59, 76, 192));
+        assert_eq!(ramp(1.0), rerun::Color::from_rgb(180, 4, 38));
+        assert_eq!(fraction(1.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn wall_outline_lies_in_the_plane() {
+        let wall = Wall {
+            name: "floor".into(),
+            point: DVec3::new(0.0, 0.0, 0.1),
+            normal: DVec3::Z,
+            velocity: DVec3::ZERO,
+            material: MaterialId(0),
+        };
+        let outline = wall_outline(&wall, DVec3::new(1.0, 2.0, 3.0), 0.5, false);
+        assert_eq!(outline.len(), 5);
+        assert_eq!(outline[0], outline[4]);
+        for p in &outline {
+            assert!((p[2] - 0.1).abs() < 1e-6);
+        }
+        let segment = wall_outline(&wall, DVec3::ZERO, 0.5, true);
+        assert_eq!(segment.len(), 2);
+    }
+}

@@ -1,0 +1,575 @@
+//! Validation of a parsed scene and the building of its simulation: materials, law
+//! resolution per material pair (mixing, overrides), the time step and its reason,
+//! whether rotation is needed, grain generation and the initial-overlap check.
+
+use std::any::Any;
+
+use glam::DVec3;
+use talus_collision::CollisionPlugin;
+use talus_contact::{
+    ContactPlugin, LawDescriptor, LawRegistry, PairAssignment, ParamValues, TimeScale,
+    check_params,
+};
+use talus_core::prelude::*;
+
+use crate::Scene;
+use crate::error::SceneError;
+use crate::generate::{GrainInit, generate};
+use crate::locate::Locator;
+use crate::schema::*;
+
+/// When a run stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopCondition {
+    /// Number of steps to run at most.
+    pub steps: u64,
+    /// Stop once the mean kinetic energy per grain is below this, J.
+    pub settle_kinetic_energy: Option<f64>,
+}
+
+/// A scene turned into a simulation builder, ready for output plugins and `build()`.
+pub struct BuiltScene {
+    /// The builder: add export plugins, then call `build()`.
+    pub builder: SimBuilder,
+    /// Scene name.
+    pub name: String,
+    /// When to stop.
+    pub stop: StopCondition,
+    /// Outputs asked for.
+    pub output: OutputSpec,
+    /// Number of grains.
+    pub grain_count: usize,
+    /// Time step and why it was chosen.
+    pub time_step_reason: String,
+}
+
+struct Ctx<'a> {
+    scene: &'a Scene,
+    locator: Locator,
+}
+
+impl Ctx<'_> {
+    fn err(&self, field: &str, expected: impl Into<String>) -> SceneError {
+        let (line, column) = self.locator.position(field);
+        SceneError {
+            file: self.scene.path.clone(),
+            line,
+            column,
+            field: field.to_string(),
+            expected: expected.into(),
+        }
+    }
+}
+
+fn positive(x: f64) -> bool {
+    x.is_finite() && x > 0.0
+}
+
+fn vec3(a: [f64; 3]) -> DVec3 {
+    DVec3::from_array(a)
+}
+
+/// A law and the pairs it serves, installed as one plugin.
+struct LawInstall<'a> {
+    law: &'a dyn LawDescriptor,
+    pairs: Vec<(PairAssignment, Box<dyn Any + Send + Sync>)>,
+}
+
+impl Plugin for LawInstall<'_> {
+    fn name(&self) -> String {
+        format!("law:{}", self.law.name())
+    }
+    fn build(&self, sim: &mut SimBuilder) {
+        self.law.install(sim, &self.pairs);
+    }
+}
+
+impl Scene {
+    /// Validates the scene against the registered laws and builds its simulation.
+    pub fn build(&self, registry: &LawRegistry) -> Result<BuiltScene, SceneError> {
+        let cx = Ctx {
+            scene: self,
+            locator: Locator::new(&self.source),
+        };
+        let f = &self.file;
+        let dimension = match f.dimension {
+            2 => Dimension::Two,
+            3 => Dimension::Three,
+            _ => return Err(cx.err("dimension", "2 or 3")),
+        };
+        let two_d = dimension == Dimension::Two;
+        let gravity = vec3(f.gravity);
+        if !gravity.is_finite() {
+            return Err(cx.err("gravity", "finite components"));
+        }
+        if two_d && gravity.z != 0.0 {
+            return Err(cx.err("gravity", "a z component of 0 in a 2-D scene"));
+        }
+        match (f.duration, f.steps) {
+            (Some(_), Some(_)) => return Err(cx.err("steps", "either `duration` or `steps`, not both")),
+            (None, None) => return Err(cx.err("duration", "a `duration` (s) or a number of `steps`")),
+            (Some(d), None) if !positive(d) => return Err(cx.err("duration", "a positive duration in seconds")),
+            (None, Some(0)) => return Err(cx.err("steps", "at least one step")),
+            _ => {}
+        }
+        if let Some(dt) = f.time_step
+            && !positive(dt)
+        {
+            return Err(cx.err("time_step", "a positive time step in seconds"));
+        }
+        if !positive(f.steps_per_collision) || f.steps_per_collision < 1.0 {
+            return Err(cx.err("steps_per_collision", "a number ≥ 1"));
+        }
+        if !(f.initial_overlap_tolerance.is_finite() && f.initial_overlap_tolerance >= 0.0) {
+            return Err(cx.err("initial_overlap_tolerance", "a non-negative fraction of a radius"));
+        }
+        if let Some(e) = f.settle_kinetic_energy
+            && !positive(e)
+        {
+            return Err(cx.err("settle_kinetic_energy", "a positive energy in joules"));
+        }
+        if !positive(f.output.recording_interval) {
+            return Err(cx.err("output.recording_interval", "a positive interval in seconds"));
+        }
+        if !positive(f.output.report_interval) {
+            return Err(cx.err("output.report_interval", "a positive interval in seconds"));
+        }
+        for (k, name) in f.plugins.iter().enumerate() {
+            if registry.get(name).is_none() {
+                return Err(cx.err(
+                    &format!("plugins[{k}]"),
+                    format!("a known plugin: {}", registry.names().join(", ")),
+                ));
+            }
+        }
+
+        // Materials.
+        if f.materials.is_empty() {
+            return Err(cx.err("materials", "at least one material"));
+        }
+        if f.materials.len() > u16::MAX as usize {
+            return Err(cx.err("materials", "at most 65535 materials"));
+        }
+        let mut materials = Vec::new();
+        for (i, m) in f.materials.iter().enumerate() {
+            if f.materials[..i].iter().any(|o| o.name == m.name) {
+                return Err(cx.err(&format!("materials[{i}].name"), "a name not used by another material"));
+            }
+            if !positive(m.density) {
+                return Err(cx.err(&format!("materials[{i}].density"), "a positive density in kg/m³"));
+            }
+            if let Some(c) = &m.contact {
+                check_contact(&cx, registry, &f.plugins, c, &format!("materials[{i}].contact"))?;
+            }
+            materials.push(Material {
+                name: m.name.clone(),
+                density: m.density,
+            });
+        }
+        let material_id = |name: &str, field: &str| -> Result<u16, SceneError> {
+            f.materials
+                .iter()
+                .position(|m| m.name == name)
+                .map(|i| i as u16)
+                .ok_or_else(|| {
+                    let known: Vec<String> = f.materials.iter().map(|m| format!("`{}`", m.name)).collect();
+                    cx.err(field, format!("a material defined in `materials` ({}), found `{name}`", known.join(", ")))
+                })
+        };
+        let mut overrides: Vec<(u16, u16, usize)> = Vec::new();
+        for (k, p) in f.pairs.iter().enumerate() {
+            let a = material_id(&p.materials.0, &format!("pairs[{k}].materials"))?;
+            let b = material_id(&p.materials.1, &format!("pairs[{k}].materials"))?;
+            check_contact(&cx, registry, &f.plugins, &p.contact, &format!("pairs[{k}].contact"))?;
+            overrides.push((a.min(b), a.max(b), k));
+        }
+
+        // Walls.
+        let mut walls = Vec::new();
+        for (k, w) in f.walls.iter().enumerate() {
+            let field = |s: &str| format!("walls[{k}].{s}");
+            match w {
+                WallSpec::Plane { name, point, normal, material, velocity } => {
+                    let mat = material_id(material, &field("material"))?;
+                    let n = vec3(*normal);
+                    if !n.is_finite() || n.length() == 0.0 {
+                        return Err(cx.err(&field("normal"), "a non-zero normal vector"));
+                    }
+                    if two_d && (n.z != 0.0 || point[2] != 0.0 || velocity[2] != 0.0) {
+                        return Err(cx.err(&field("normal"), "a wall in the xy-plane (z components 0) in a 2-D scene"));
+                    }
+                    if !vec3(*point).is_finite() || !vec3(*velocity).is_finite() {
+                        return Err(cx.err(&field("point"), "finite coordinates"));
+                    }
+                    walls.push((k, WallBundle::new(name.clone(), vec3(*point), n, MaterialId(mat)).with_velocity(vec3(*velocity))));
+                }
+                WallSpec::Box { min, max, material, omit } => {
+                    let mat = material_id(material, &field("material"))?;
+                    let (lo, hi) = (vec3(*min), vec3(*max));
+                    let axes = if two_d { 2 } else { 3 };
+                    if (0..axes).any(|d| !(lo[d] < hi[d])) || !lo.is_finite() || !hi.is_finite() {
+                        return Err(cx.err(&field("max"), "every component of `max` above that of `min`"));
+                    }
+                    const FACES: [&str; 6] = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
+                    for (j, o) in omit.iter().enumerate() {
+                        if !FACES[..2 * axes].contains(&o.as_str()) {
+                            return Err(cx.err(&format!("walls[{k}].omit[{j}]"), format!("one of {}", FACES[..2 * axes].join(", "))));
+                        }
+                    }
+                    for d in 0..axes {
+                        let mut n = DVec3::ZERO;
+                        n[d] = 1.0;
+                        let mid = if two_d { DVec3::new(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.0) } else { 0.5 * (lo + hi) };
+                        let mut p_lo = mid;
+                        p_lo[d] = lo[d];
+                        let mut p_hi = mid;
+                        p_hi[d] = hi[d];
+                        if !omit.iter().any(|o| o == FACES[2 * d]) {
+                            walls.push((k, WallBundle::new(FACES[2 * d], p_lo, n, MaterialId(mat))));
+                        }
+                        if !omit.iter().any(|o| o == FACES[2 * d + 1]) {
+                            walls.push((k, WallBundle::new(FACES[2 * d + 1], p_hi, -n, MaterialId(mat))));
+                        }
+                    }
+                }
+            }
+        }
+
+        // Grains.
+        let mut grains: Vec<GrainInit> = Vec::new();
+        for (k, g) in f.grains.iter().enumerate() {
+            let field = |s: &str| format!("grains[{k}].{s}");
+            let material = match g {
+                GrainSource::List { material, grains: list } => {
+                    for (j, s) in list.iter().enumerate() {
+                        if !positive(s.radius) {
+                            return Err(cx.err(&format!("grains[{k}].grains[{j}].radius"), "a positive radius in metres"));
+                        }
+                        if !vec3(s.position).is_finite() || !vec3(s.velocity).is_finite() || !vec3(s.angular_velocity).is_finite() {
+                            return Err(cx.err(&format!("grains[{k}].grains[{j}]"), "finite position and velocities"));
+                        }
+                    }
+                    material
+                }
+                GrainSource::Lattice { material, radius, region, spacing, velocity } => {
+                    if !positive(*radius) {
+                        return Err(cx.err(&field("radius"), "a positive radius in metres"));
+                    }
+                    check_region(&cx, region, &field("region"), two_d)?;
+                    if let Some(a) = spacing
+                        && !(positive(*a))
+                    {
+                        return Err(cx.err(&field("spacing"), "a positive spacing in metres"));
+                    }
+                    if !vec3(*velocity).is_finite() {
+                        return Err(cx.err(&field("velocity"), "a finite velocity"));
+                    }
+                    material
+                }
+                GrainSource::Random { material, region, count, radius, velocity_spread, .. } => {
+                    check_region(&cx, region, &field("region"), two_d)?;
+                    if *count == 0 {
+                        return Err(cx.err(&field("count"), "at least one grain"));
+                    }
+                    match *radius {
+                        RadiusSpec::Fixed(r) if !positive(r) => {
+                            return Err(cx.err(&field("radius"), "a positive radius in metres"));
+                        }
+                        RadiusSpec::Uniform { min, max } if !(positive(min) && positive(max) && min <= max) => {
+                            return Err(cx.err(&field("radius"), "radii with 0 < min ≤ max"));
+                        }
+                        _ => {}
+                    }
+                    if !(velocity_spread.is_finite() && *velocity_spread >= 0.0) {
+                        return Err(cx.err(&field("velocity_spread"), "a non-negative speed"));
+                    }
+                    material
+                }
+            };
+            let mat = material_id(material, &field("material"))?;
+            let made = generate(g, k, mat, two_d).map_err(|(sub, expected)| cx.err(&field(&sub), expected))?;
+            grains.extend(made);
+        }
+        if grains.is_empty() {
+            return Err(cx.err("grains", "at least one grain"));
+        }
+        check_initial_overlaps(&cx, &grains, &walls, f.initial_overlap_tolerance)?;
+
+        // Lightest grain of each material, for reduced masses and the time step.
+        let n_mat = materials.len();
+        let mut lightest = vec![f64::INFINITY; n_mat];
+        let mut smallest = vec![f64::INFINITY; n_mat];
+        for g in &grains {
+            let (m, _) = mass_and_inertia(dimension, g.radius, materials[g.material as usize].density);
+            lightest[g.material as usize] = lightest[g.material as usize].min(m);
+            smallest[g.material as usize] = smallest[g.material as usize].min(g.radius);
+        }
+        let wall_material: Vec<bool> = (0..n_mat)
+            .map(|m| walls.iter().any(|(_, w)| w.wall.material.0 as usize == m))
+            .collect();
+
+        // Resolve a law for each material pair.
+        let mut installs: Vec<LawInstall> = Vec::new();
+        let mut time_scale: Option<(TimeScale, String)> = None;
+        let mut stability: Option<(f64, String)> = None;
+        let mut rotation = false;
+        for a in 0..n_mat as u16 {
+            for b in a..n_mat as u16 {
+                let (spec, field) = if let Some(&(_, _, k)) = overrides.iter().find(|o| o.0 == a && o.1 == b) {
+                    (f.pairs[k].contact.clone(), format!("pairs[{k}].contact"))
+                } else {
+                    match (&f.materials[a as usize].contact, &f.materials[b as usize].contact) {
+                        (Some(x), Some(y)) if x.law == y.law => {
+                            let law = registry.get(&x.law).expect("checked above");
+                            let mixed = ParamValues::mix(law.params(), &ParamValues(x.params.clone()), &ParamValues(y.params.clone()));
+                            (ContactSpec { law: x.law.clone(), params: mixed.0 }, format!("materials[{b}].contact"))
+                        }
+                        (Some(x), Some(y)) => {
+                            return Err(cx.err(
+                                &format!("materials[{b}].contact.law"),
+                                format!(
+                                    "the same law as material `{}` (`{}`, found `{}`), or a `pairs` entry for ({}, {})",
+                                    f.materials[a as usize].name, x.law, y.law, f.materials[a as usize].name, f.materials[b as usize].name
+                                ),
+                            ));
+                        }
+                        (Some(x), None) => (x.clone(), format!("materials[{a}].contact")),
+                        (None, Some(y)) => (y.clone(), format!("materials[{b}].contact")),
+                        (None, None) => continue,
+                    }
+                };
+                // Reduced masses of the contacts this pair can have.
+                let mut min_mass = f64::INFINITY;
+                let mut min_radius = f64::INFINITY;
+                let (la, lb) = (lightest[a as usize], lightest[b as usize]);
+                if la.is_finite() && lb.is_finite() {
+                    min_mass = min_mass.min(la * lb / (la + lb));
+                    let (ra, rb) = (smallest[a as usize], smallest[b as usize]);
+                    min_radius = min_radius.min(ra * rb / (ra + rb));
+                }
+                if la.is_finite() && wall_material[b as usize] {
+                    min_mass = min_mass.min(la);
+                    min_radius = min_radius.min(smallest[a as usize]);
+                }
+                if lb.is_finite() && wall_material[a as usize] {
+                    min_mass = min_mass.min(lb);
+                    min_radius = min_radius.min(smallest[b as usize]);
+                }
+                if !min_mass.is_finite() {
+                    continue; // no contact of this pair can occur
+                }
+                let law = registry.get(&spec.law).expect("checked above");
+                let values = check_params(law.params(), &ParamValues(spec.params.clone()))
+                    .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
+                let pair = PairAssignment {
+                    materials: (a, b),
+                    names: (materials[a as usize].name.clone(), materials[b as usize].name.clone()),
+                    values,
+                    min_effective_mass: min_mass,
+                    min_effective_radius: min_radius,
+                    dimension,
+                };
+                let (typed, ts) = law
+                    .resolve(&pair)
+                    .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
+                rotation |= law.produces_torque(&pair.values);
+                let label = format!("{} for {}–{}", law.name(), pair.names.0, pair.names.1);
+                if time_scale.as_ref().is_none_or(|(t, _)| ts.contact_time < t.contact_time) {
+                    time_scale = Some((ts, label.clone()));
+                }
+                if stability.as_ref().is_none_or(|(s, _)| ts.stability_limit < *s) {
+                    stability = Some((ts.stability_limit, label));
+                }
+                match installs.iter_mut().find(|i| i.law.name() == law.name()) {
+                    Some(i) => i.pairs.push((pair, typed)),
+                    None => installs.push(LawInstall { law, pairs: vec![(pair, typed)] }),
+                }
+            }
+        }
+
+        // Time step.
+        let (dt, time_step_reason) = match (f.time_step, &time_scale) {
+            (Some(dt), _) => {
+                if let Some((limit, label)) = &stability
+                    && dt > *limit
+                    && !f.force_time_step
+                {
+                    return Err(cx.err(
+                        "time_step",
+                        format!(
+                            "a step below the stability bound {limit:.4e} s of {label} (set `force_time_step: true` to run anyway)"
+                        ),
+                    ));
+                }
+                (dt, format!("set by the scene ({dt:.4e} s)"))
+            }
+            (None, Some((ts, label))) => {
+                let dt = ts.contact_time / f.steps_per_collision;
+                (
+                    dt,
+                    format!(
+                        "automatic: shortest contact time {:.4e} s ({label}) / {} steps per collision = {dt:.4e} s (stability bound {:.4e} s)",
+                        ts.contact_time,
+                        f.steps_per_collision,
+                        stability.as_ref().map(|s| s.0).unwrap_or(f64::INFINITY)
+                    ),
+                )
+            }
+            (None, None) => {
+                return Err(cx.err("time_step", "a time step: no material pair has a contact law to derive one from"));
+            }
+        };
+        let steps = match (f.steps, f.duration) {
+            (Some(n), _) => n,
+            (None, Some(d)) => (d / dt).ceil() as u64,
+            _ => unreachable!("checked above"),
+        };
+
+        let integrator = match f.integrator {
+            IntegratorName::VelocityVerlet => Integrator::VelocityVerlet,
+            IntegratorName::SymplecticEuler => Integrator::SymplecticEuler,
+        };
+        let mut builder = SimBuilder::new(SimConfig {
+            dimension,
+            dt,
+            gravity,
+            integrator,
+            rotation,
+        });
+        builder.world.insert_resource(Materials(materials));
+        builder.add_plugin(&ContactPlugin);
+        for install in &installs {
+            builder.add_plugin(install);
+        }
+        builder.add_plugin(&CollisionPlugin);
+        builder.note(format!("time step: {time_step_reason}"));
+        builder.note(format!("integrator: {integrator:?}"));
+        builder.note(if rotation {
+            "rotation: integrated (a contact law can torque grains)".to_string()
+        } else {
+            "rotation: not integrated (no contact law in this scene can torque a grain)".to_string()
+        });
+        builder.note(format!("steps: {steps}, grains: {}, walls: {}", grains.len(), walls.len()));
+        for (_, w) in walls {
+            builder.world.spawn(w);
+        }
+        let grain_count = grains.len();
+        let densities: Vec<f64> = builder.world.resource::<Materials>().0.iter().map(|m| m.density).collect();
+        builder.world.spawn_batch(grains.into_iter().map(|g| {
+            GrainBundle::new(dimension, g.position, g.radius, densities[g.material as usize], MaterialId(g.material))
+                .with_velocity(g.velocity)
+                .with_angular_velocity(g.angular_velocity)
+        }));
+        Ok(BuiltScene {
+            builder,
+            name: f.name.clone(),
+            stop: StopCondition {
+                steps,
+                settle_kinetic_energy: f.settle_kinetic_energy,
+            },
+            output: f.output.clone(),
+            grain_count,
+            time_step_reason,
+        })
+    }
+}
+
+fn check_contact(
+    cx: &Ctx,
+    registry: &LawRegistry,
+    plugins: &[String],
+    c: &ContactSpec,
+    field: &str,
+) -> Result<(), SceneError> {
+    let Some(law) = registry.get(&c.law) else {
+        return Err(cx.err(&format!("{field}.law"), format!("a registered contact law: {}", registry.names().join(", "))));
+    };
+    if !plugins.iter().any(|p| *p == c.law) {
+        return Err(cx.err(&format!("{field}.law"), format!("a law listed in `plugins` (add \"{}\" there)", c.law)));
+    }
+    let values = check_params(law.params(), &ParamValues(c.params.clone()))
+        .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
+    law.validate(&values)
+        .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))
+}
+
+fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), SceneError> {
+    let axes = if two_d { 2 } else { 3 };
+    if !vec3(r.min).is_finite() || !vec3(r.max).is_finite() || (0..axes).any(|d| !(r.min[d] < r.max[d])) {
+        return Err(cx.err(&format!("{field}.max"), "every component of `max` above that of `min`"));
+    }
+    Ok(())
+}
+
+fn check_initial_overlaps(
+    cx: &Ctx,
+    grains: &[GrainInit],
+    walls: &[(usize, WallBundle)],
+    tolerance: f64,
+) -> Result<(), SceneError> {
+    for g in grains {
+        for (k, w) in walls {
+            let overlap = g.radius - (g.position - w.wall.point).dot(w.wall.normal);
+            if overlap > tolerance * g.radius {
+                return Err(cx.err(
+                    &format!("grains[{}]", g.source),
+                    format!(
+                        "grains clear of wall `{}` (walls[{k}]): a grain at ({:.4}, {:.4}, {:.4}) overlaps it by {:.3e} m, more than {} of its radius",
+                        w.wall.name, g.position.x, g.position.y, g.position.z, overlap, tolerance
+                    ),
+                ));
+            }
+        }
+    }
+    // Grain–grain overlaps on a cell grid.
+    let rmax = grains.iter().map(|g| g.radius).fold(0.0, f64::max);
+    let lo = grains.iter().fold(DVec3::splat(f64::INFINITY), |a, g| a.min(g.position));
+    let hi = grains.iter().fold(DVec3::splat(f64::NEG_INFINITY), |a, g| a.max(g.position));
+    let mut cell = 2.0 * rmax;
+    let mut dims;
+    loop {
+        dims = ((hi - lo) / cell).floor() + DVec3::ONE;
+        if dims.x * dims.y * dims.z <= (8 * grains.len()).max(4096) as f64 {
+            break;
+        }
+        cell *= 1.5;
+    }
+    let (nx, ny, nz) = (dims.x as usize, dims.y as usize, dims.z as usize);
+    let coords = |p: DVec3| {
+        let q = (p - lo) / cell;
+        ((q.x as usize).min(nx - 1), (q.y as usize).min(ny - 1), (q.z as usize).min(nz - 1))
+    };
+    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nx * ny * nz];
+    for (i, g) in grains.iter().enumerate() {
+        let (x, y, z) = coords(g.position);
+        bins[x + nx * (y + ny * z)].push(i as u32);
+    }
+    for (i, g) in grains.iter().enumerate() {
+        let (x, y, z) = coords(g.position);
+        for cz in z.saturating_sub(1)..=(z + 1).min(nz - 1) {
+            for cy in y.saturating_sub(1)..=(y + 1).min(ny - 1) {
+                for cx_ in x.saturating_sub(1)..=(x + 1).min(nx - 1) {
+                    for &j in &bins[cx_ + nx * (cy + ny * cz)] {
+                        let j = j as usize;
+                        if j <= i {
+                            continue;
+                        }
+                        let h = &grains[j];
+                        let overlap = g.radius + h.radius - g.position.distance(h.position);
+                        if overlap > tolerance * g.radius.min(h.radius) {
+                            let field = format!("grains[{}]", h.source);
+                            return Err(cx.err(
+                                &field,
+                                format!(
+                                    "grains that do not overlap: grains at ({:.4}, {:.4}, {:.4}) (grains[{}]) and ({:.4}, {:.4}, {:.4}) overlap by {:.3e} m, more than {} of the smaller radius",
+                                    g.position.x, g.position.y, g.position.z, g.source, h.position.x, h.position.y, h.position.z, overlap, tolerance
+                                ),
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}

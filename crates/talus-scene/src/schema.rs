@@ -1,0 +1,292 @@
+//! The RON schema of a scene file. Every field is documented in
+//! `docs/scene-reference.md`; units are SI.
+
+use std::fmt;
+
+use serde::de::{self, MapAccess, Visitor};
+use serde::{Deserialize, Deserializer};
+
+/// A vector written as a tuple `(x, y, z)`.
+pub type Vec3 = [f64; 3];
+
+fn default_dimension() -> u8 {
+    3
+}
+fn default_steps_per_collision() -> f64 {
+    50.0
+}
+fn default_overlap_tolerance() -> f64 {
+    1e-3
+}
+
+/// A whole scene.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields, rename = "Scene")]
+pub struct SceneFile {
+    /// Name of the experiment; default output folder is `out/<name>/`.
+    pub name: String,
+    /// 2 (disks in the xy-plane) or 3 (spheres). Default: 3.
+    #[serde(default = "default_dimension")]
+    pub dimension: u8,
+    /// Gravitational acceleration, m/s². Default: (0, 0, 0).
+    #[serde(default)]
+    pub gravity: Vec3,
+    /// Simulated duration, s. Give this or `steps`.
+    #[serde(default)]
+    pub duration: Option<f64>,
+    /// Number of steps. Give this or `duration`.
+    #[serde(default)]
+    pub steps: Option<u64>,
+    /// Time step, s. Default: automatic, the shortest contact time / `steps_per_collision`.
+    #[serde(default)]
+    pub time_step: Option<f64>,
+    /// Steps per shortest contact for the automatic time step. Default: 50.
+    #[serde(default = "default_steps_per_collision")]
+    pub steps_per_collision: f64,
+    /// Accept a `time_step` above the stability bound. Default: false.
+    #[serde(default)]
+    pub force_time_step: bool,
+    /// Integration scheme. Default: VelocityVerlet.
+    #[serde(default)]
+    pub integrator: IntegratorName,
+    /// Plugins (contact laws) the scene uses, by name.
+    #[serde(default)]
+    pub plugins: Vec<String>,
+    /// Materials.
+    pub materials: Vec<MaterialSpec>,
+    /// Contact laws of unlike material pairs, overriding the mixing rule.
+    #[serde(default)]
+    pub pairs: Vec<PairSpec>,
+    /// Walls.
+    #[serde(default)]
+    pub walls: Vec<WallSpec>,
+    /// Grain sources.
+    pub grains: Vec<GrainSource>,
+    /// Largest initial overlap allowed, as a fraction of the smaller radius. Default: 1e-3.
+    #[serde(default = "default_overlap_tolerance")]
+    pub initial_overlap_tolerance: f64,
+    /// Stop early once the mean kinetic energy per grain falls below this, J.
+    #[serde(default)]
+    pub settle_kinetic_energy: Option<f64>,
+    /// What to write.
+    #[serde(default)]
+    pub output: OutputSpec,
+}
+
+/// Integration scheme names.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+pub enum IntegratorName {
+    /// Velocity Verlet.
+    #[default]
+    VelocityVerlet,
+    /// Symplectic Euler.
+    SymplecticEuler,
+}
+
+/// A material.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    /// Name grains and walls refer to.
+    pub name: String,
+    /// Density, kg/m³ (2-D: per metre of thickness).
+    pub density: f64,
+    /// Contact law and its parameters for contacts with this material.
+    #[serde(default)]
+    pub contact: Option<ContactSpec>,
+}
+
+/// A contact law by name, with its parameters: `(law: "linear_spring", stiffness: 1e5, ...)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContactSpec {
+    /// Law name.
+    pub law: String,
+    /// Numeric parameters in file order.
+    pub params: Vec<(String, f64)>,
+}
+
+impl<'de> Deserialize<'de> for ContactSpec {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = ContactSpec;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a contact law: (law: \"name\", parameter: number, ...)")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<ContactSpec, A::Error> {
+                let mut law = None;
+                let mut params = Vec::new();
+                while let Some(key) = map.next_key::<String>()? {
+                    if key == "law" {
+                        law = Some(map.next_value::<String>()?);
+                    } else {
+                        let v = map.next_value::<f64>()?;
+                        if params.iter().any(|(k, _)| *k == key) {
+                            return Err(de::Error::custom(format!("parameter `{key}` given twice")));
+                        }
+                        params.push((key, v));
+                    }
+                }
+                let law = law.ok_or_else(|| de::Error::missing_field("law"))?;
+                Ok(ContactSpec { law, params })
+            }
+        }
+        d.deserialize_struct("Contact", &["law"], V)
+    }
+}
+
+/// A contact law for one unlike pair.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PairSpec {
+    /// The two material names.
+    pub materials: (String, String),
+    /// The law and its parameters for this pair.
+    pub contact: ContactSpec,
+}
+
+/// A wall or a set of walls.
+#[derive(Clone, Debug, Deserialize)]
+pub enum WallSpec {
+    /// An infinite plane.
+    Plane {
+        /// Name in reports.
+        name: String,
+        /// A point on the plane, m.
+        point: Vec3,
+        /// Normal pointing towards the grains.
+        normal: Vec3,
+        /// Material name.
+        material: String,
+        /// Prescribed velocity, m/s. Default: (0, 0, 0).
+        #[serde(default)]
+        velocity: Vec3,
+    },
+    /// The inner faces of an axis-aligned box: 6 planes (4 in 2-D).
+    Box {
+        /// Lower corner, m.
+        min: Vec3,
+        /// Upper corner, m.
+        max: Vec3,
+        /// Material name.
+        material: String,
+        /// Faces to leave out, among "x_min", "x_max", "y_min", "y_max", "z_min", "z_max".
+        #[serde(default)]
+        omit: Vec<String>,
+    },
+}
+
+/// A radius distribution.
+#[derive(Clone, Debug, Deserialize)]
+pub enum RadiusSpec {
+    /// Every grain has this radius, m.
+    Fixed(f64),
+    /// Radii uniform in [min, max], m.
+    Uniform {
+        /// Smallest radius.
+        min: f64,
+        /// Largest radius.
+        max: f64,
+    },
+}
+
+/// An axis-aligned region.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Region {
+    /// Lower corner, m.
+    pub min: Vec3,
+    /// Upper corner, m.
+    pub max: Vec3,
+}
+
+/// One explicitly placed grain.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GrainSpec {
+    /// Centre, m.
+    pub position: Vec3,
+    /// Radius, m.
+    pub radius: f64,
+    /// Velocity, m/s. Default: 0.
+    #[serde(default)]
+    pub velocity: Vec3,
+    /// Angular velocity, rad/s. Default: 0.
+    #[serde(default)]
+    pub angular_velocity: Vec3,
+}
+
+/// Where grains come from.
+#[derive(Clone, Debug, Deserialize)]
+pub enum GrainSource {
+    /// An explicit list.
+    List {
+        /// Material name.
+        material: String,
+        /// The grains.
+        grains: Vec<GrainSpec>,
+    },
+    /// A simple cubic (2-D: square) lattice filling a region.
+    Lattice {
+        /// Material name.
+        material: String,
+        /// Radius, m.
+        radius: f64,
+        /// Region filled (centres stay a radius inside it).
+        region: Region,
+        /// Distance between neighbouring centres, m. Default: 2.1 × radius.
+        #[serde(default)]
+        spacing: Option<f64>,
+        /// Initial velocity, m/s. Default: 0.
+        #[serde(default)]
+        velocity: Vec3,
+    },
+    /// Random sequential insertion without overlap.
+    Random {
+        /// Material name.
+        material: String,
+        /// Region the grains must lie inside.
+        region: Region,
+        /// Number of grains.
+        count: usize,
+        /// Radius distribution.
+        radius: RadiusSpec,
+        /// Seed of the random generator.
+        seed: u64,
+        /// Random velocities uniform in [−v, v] per component, m/s. Default: 0.
+        #[serde(default)]
+        velocity_spread: f64,
+    },
+}
+
+fn default_interval() -> f64 {
+    0.01
+}
+fn default_true() -> bool {
+    true
+}
+
+/// Outputs of a run.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSpec {
+    /// Write a rerun recording. Default: true.
+    #[serde(default = "default_true")]
+    pub recording: bool,
+    /// Simulated time between recording frames, s. Default: 0.01.
+    #[serde(default = "default_interval")]
+    pub recording_interval: f64,
+    /// Simulated time between report samples, s. Default: 0.01.
+    #[serde(default = "default_interval")]
+    pub report_interval: f64,
+}
+
+impl Default for OutputSpec {
+    fn default() -> Self {
+        Self {
+            recording: true,
+            recording_interval: default_interval(),
+            report_interval: default_interval(),
+        }
+    }
+}

@@ -1,0 +1,312 @@
+//! The linear spring–dashpot contact law with a Coulomb-capped tangential spring.
+//!
+//! Normal: F_n = k_n δ − c_n v_n along the normal (v_n > 0 while separating). The
+//! dashpot acts until the overlap closes, as in LAMMPS `gran/hooke`, so the measured
+//! restitution equals the analytic exp(−ζπ/√(1 − ζ²)).
+//! Tangential: a spring ξ (history) rotated into the current tangent plane every step,
+//! incremented by v_t dt, F_t = −k_t ξ − c_t v_t capped at μ|F_n|; on slip the spring
+//! is reset to the capped force. Energy: ½k_n δ² + ½k_t|ξ|² stored; dashpots and the
+//! slider dissipate, each reported on its own channel.
+
+use std::any::Any;
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use talus_contact::*;
+use talus_core::schedule::SimBuilder;
+
+/// Name scenes use.
+pub const NAME: &str = "linear_spring";
+
+/// Normal damping of a pair.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NormalDamping {
+    /// A fixed dashpot coefficient c_n, N s/m.
+    Coefficient(f64),
+    /// A damping ratio ζ: c_n = 2ζ√(m* k_n) for each contact's own reduced mass, so
+    /// that every pair has the restitution the ratio was made from.
+    Ratio(f64),
+}
+
+/// Resolved parameters of one material pair.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinearParams {
+    /// Normal stiffness k_n, N/m.
+    pub normal_stiffness: f64,
+    /// Normal damping.
+    pub normal_damping: NormalDamping,
+    /// Tangential stiffness k_t, N/m.
+    pub tangential_stiffness: f64,
+    /// Tangential damping c_t = ratio × c_n.
+    pub tangential_damping_ratio: f64,
+    /// Coulomb friction coefficient μ.
+    pub friction: f64,
+}
+
+/// Per-contact history: the tangential spring, and the dashpot forces of the previous
+/// step (for the trapezoidal work of the dashpots, the rule velocity Verlet follows).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TangentialSpring {
+    /// Tangential spring displacement ξ, m.
+    pub spring: DVec3,
+    /// Normal dashpot force of the previous evaluation, N (along its normal).
+    pub normal_dashpot: DVec3,
+    /// Tangential dashpot force of the previous evaluation, N.
+    pub tangential_dashpot: DVec3,
+}
+
+/// The law's force routine.
+pub struct LinearSpring;
+
+/// Damping ratio that gives restitution `e` for a linear spring–dashpot:
+/// ζ = −ln e / √(π² + ln² e).
+pub fn damping_ratio_from_restitution(e: f64) -> f64 {
+    let l = e.ln();
+    -l / (PI * PI + l * l).sqrt()
+}
+
+/// Stiffness giving a collision time `tc` with restitution `e` for reduced mass `m`:
+/// k = m (π² + ln² e) / tc².
+pub fn stiffness_from_collision_time(tc: f64, e: f64, m: f64) -> f64 {
+    let l = e.ln();
+    m * (PI * PI + l * l) / (tc * tc)
+}
+
+impl ContactLaw for LinearSpring {
+    type Params = LinearParams;
+    type History = TangentialSpring;
+    const DISSIPATION: &'static [&'static str] =
+        &["normal_damping", "tangential_damping", "friction_slip"];
+
+    #[inline]
+    fn evaluate(
+        p: &LinearParams,
+        kin: &ContactKinematics,
+        spring: &mut TangentialSpring,
+        dt: f64,
+    ) -> ContactResponse {
+        let mut out = ContactResponse::default();
+        let delta = kin.overlap;
+        if delta <= 0.0 {
+            *spring = TangentialSpring::default();
+            return out;
+        }
+        // Relative displacement of the contact point over this step (half-step velocity).
+        let displacement = kin.relative_velocity * dt;
+        let n = kin.normal;
+        let k = p.normal_stiffness;
+        let c = match p.normal_damping {
+            NormalDamping::Coefficient(c) => c,
+            NormalDamping::Ratio(zeta) => 2.0 * zeta * (kin.effective_mass * k).sqrt(),
+        };
+        let vn = kin.normal_velocity;
+        let fn_mag = k * delta - c * vn;
+        out.force = n * fn_mag;
+        out.elastic_energy = 0.5 * k * delta * delta;
+        // Work of the dashpot by the trapezoidal rule over the step's displacement.
+        let normal_dashpot = -c * vn * n;
+        out.dissipated[0] = -0.5 * (spring.normal_dashpot + normal_dashpot).dot(displacement);
+        spring.normal_dashpot = normal_dashpot;
+
+        if p.friction > 0.0 {
+            let kt = p.tangential_stiffness;
+            let ct = p.tangential_damping_ratio * c;
+            let vt = kin.tangential_velocity;
+            // Rotate the spring into the current tangent plane, keeping its length.
+            let old = spring.spring;
+            let old_len2 = old.length_squared();
+            let mut xi = old - n * n.dot(old);
+            let len2 = xi.length_squared();
+            if len2 > 0.0 {
+                xi *= (old_len2 / len2).sqrt();
+            }
+            xi += vt * dt;
+            let mut ft = -kt * xi - ct * vt;
+            let cap = p.friction * fn_mag.abs();
+            let ft_len = ft.length();
+            let trial_elastic = 0.5 * kt * xi.length_squared();
+            if ft_len > cap {
+                ft *= cap / ft_len;
+                // Reset the spring so that it carries the capped force.
+                xi = -(ft + ct * vt) / kt;
+                let capped_elastic = 0.5 * kt * xi.length_squared();
+                out.dissipated[2] = (trial_elastic - capped_elastic).max(0.0);
+            }
+            spring.spring = xi;
+            out.force += ft;
+            out.elastic_energy += 0.5 * kt * xi.length_squared();
+            let tangential_dashpot = -ct * vt;
+            out.dissipated[1] =
+                -0.5 * (spring.tangential_dashpot + tangential_dashpot).dot(displacement);
+            spring.tangential_dashpot = tangential_dashpot;
+        }
+        out
+    }
+}
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec {
+        name: "stiffness",
+        unit: "N/m",
+        doc: "normal stiffness k_n; give this or `collision_time`",
+        range: ParamRange::POSITIVE,
+        default: None,
+        mix: MixRule::Harmonic,
+    },
+    ParamSpec {
+        name: "collision_time",
+        unit: "s",
+        doc: "duration of a binary collision of the lightest pair; sets k_n (with `restitution`)",
+        range: ParamRange::POSITIVE,
+        default: None,
+        mix: MixRule::Arithmetic,
+    },
+    ParamSpec {
+        name: "damping",
+        unit: "N s/m",
+        doc: "normal dashpot coefficient c_n; give this or `restitution`",
+        range: ParamRange::NON_NEGATIVE,
+        default: None,
+        mix: MixRule::Harmonic,
+    },
+    ParamSpec {
+        name: "restitution",
+        unit: "1",
+        doc: "normal coefficient of restitution e; sets the damping ratio for every pair",
+        range: ParamRange::UNIT_OPEN_CLOSED,
+        default: None,
+        mix: MixRule::Geometric,
+    },
+    ParamSpec {
+        name: "friction",
+        unit: "1",
+        doc: "Coulomb friction coefficient μ (0: no tangential force, no torque)",
+        range: ParamRange::NON_NEGATIVE,
+        default: Some(0.0),
+        mix: MixRule::Geometric,
+    },
+    ParamSpec {
+        name: "tangential_stiffness_ratio",
+        unit: "1",
+        doc: "k_t / k_n (2/7 makes tangential and normal periods equal for spheres)",
+        range: ParamRange::POSITIVE,
+        default: Some(2.0 / 7.0),
+        mix: MixRule::Arithmetic,
+    },
+    ParamSpec {
+        name: "tangential_damping_ratio",
+        unit: "1",
+        doc: "c_t / c_n",
+        range: ParamRange::NON_NEGATIVE,
+        default: Some(0.0),
+        mix: MixRule::Arithmetic,
+    },
+];
+
+/// What scenes see of the linear law.
+pub struct LinearSpringLaw;
+
+impl LinearSpringLaw {
+    /// Resolves typed parameters for a pair whose lightest reduced mass is `min_mass`.
+    pub fn resolve_params(values: &ParamValues, min_mass: f64) -> Result<LinearParams, ParamError> {
+        let err = |field: &str, expected: &str| ParamError {
+            field: field.into(),
+            expected: expected.into(),
+        };
+        let restitution = values.get("restitution");
+        let k = match (values.get("stiffness"), values.get("collision_time")) {
+            (Some(k), None) => k,
+            (None, Some(tc)) => {
+                let e = restitution.ok_or_else(|| {
+                    err("restitution", "a restitution coefficient, required with `collision_time`")
+                })?;
+                stiffness_from_collision_time(tc, e, min_mass)
+            }
+            (Some(_), Some(_)) => {
+                return Err(err(
+                    "collision_time",
+                    "either `stiffness` or `collision_time`, not both",
+                ));
+            }
+            (None, None) => return Err(err("stiffness", "`stiffness` or `collision_time`")),
+        };
+        let damping = match (values.get("damping"), restitution) {
+            (Some(c), None) => NormalDamping::Coefficient(c),
+            (None, Some(e)) => NormalDamping::Ratio(damping_ratio_from_restitution(e)),
+            (Some(_), Some(_)) => {
+                return Err(err("damping", "either `damping` or `restitution`, not both"));
+            }
+            (None, None) => return Err(err("restitution", "`restitution` or `damping`")),
+        };
+        Ok(LinearParams {
+            normal_stiffness: k,
+            normal_damping: damping,
+            tangential_stiffness: k * values.get("tangential_stiffness_ratio").unwrap_or(2.0 / 7.0),
+            tangential_damping_ratio: values.get("tangential_damping_ratio").unwrap_or(0.0),
+            friction: values.get("friction").unwrap_or(0.0),
+        })
+    }
+
+    /// Contact time and stability limit of a pair of reduced mass `m`.
+    pub fn time_scale(p: &LinearParams, m: f64) -> TimeScale {
+        let k = p.normal_stiffness;
+        let omega0 = (k / m).sqrt();
+        let zeta = match p.normal_damping {
+            NormalDamping::Coefficient(c) => c / (2.0 * (k * m).sqrt()),
+            NormalDamping::Ratio(z) => z,
+        };
+        let contact_time = if zeta < 1.0 {
+            PI / (omega0 * (1.0 - zeta * zeta).sqrt())
+        } else {
+            f64::INFINITY
+        };
+        // Tangential spring with rolling spheres: effective mass 2/7 m*, so ω_t² = 3.5 k_t / m*.
+        let omega_t = if p.friction > 0.0 {
+            (3.5 * p.tangential_stiffness / m).sqrt()
+        } else {
+            0.0
+        };
+        let omega = omega0.max(omega_t);
+        // Stability of the explicit central-difference scheme for a damped oscillator.
+        let stability_limit = 2.0 / omega * ((1.0 + zeta * zeta).sqrt() - zeta);
+        TimeScale {
+            contact_time: contact_time.min(PI / omega),
+            stability_limit,
+        }
+    }
+}
+
+impl LawDescriptor for LinearSpringLaw {
+    fn name(&self) -> &'static str {
+        NAME
+    }
+
+    fn summary(&self) -> &'static str {
+        "linear spring–dashpot normal force, Coulomb-capped tangential spring"
+    }
+
+    fn params(&self) -> &'static [ParamSpec] {
+        PARAMS
+    }
+
+    fn validate(&self, values: &ParamValues) -> Result<(), ParamError> {
+        // Resolve with a unit mass: catches missing or conflicting fields.
+        Self::resolve_params(values, 1.0).map(|_| ())
+    }
+
+    fn produces_torque(&self, values: &ParamValues) -> bool {
+        values.get("friction").unwrap_or(0.0) > 0.0
+    }
+
+    fn resolve(
+        &self,
+        pair: &PairAssignment,
+    ) -> Result<(Box<dyn Any + Send + Sync>, TimeScale), ParamError> {
+        let p = Self::resolve_params(&pair.values, pair.min_effective_mass)?;
+        Ok((Box::new(p), Self::time_scale(&p, pair.min_effective_mass)))
+    }
+
+    fn install(&self, sim: &mut SimBuilder, pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)]) {
+        install_law::<LinearSpring>(sim, NAME, pairs);
+    }
+}

@@ -1,0 +1,18 @@
+//! Talus: discrete-element simulation of granular matter on an entity-component system.
+//!
+//! This facade re-exports the crates of the workspace and assembles the registry of
+//! contact laws the `talus` binary offers.
+
+pub use talus_cli as cli;
+pub use talus_collision as collision;
+pub use talus_contact as contact;
+pub use talus_core as core;
+pub use talus_rerun as rerun_export;
+pub use talus_scene as scene;
+
+/// Every contact law shipped with Talus, by name.
+pub fn registry() -> talus_contact::LawRegistry {
+    let mut r = talus_contact::LawRegistry::new();
+    r.register(Box::new(talus_linear_spring::LinearSpringLaw));
+    r
+}
