@@ -70,7 +70,9 @@ pub fn main_with(registry: LawRegistry) -> ExitCode {
             quiet,
         } => {
             if let Some(n) = threads
-                && let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n).build_global()
+                && let Err(e) = rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build_global()
             {
                 eprintln!("error: cannot start {n} threads: {e}");
                 return ExitCode::from(2);

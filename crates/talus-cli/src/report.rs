@@ -60,7 +60,9 @@ impl ReportSample {
             dissipated_total,
             gravity_work: ledger.gravity_work,
             wall_work: ledger.wall_work,
-            energy_balance: e.translational_kinetic + e.rotational_kinetic + e.elastic
+            energy_balance: e.translational_kinetic
+                + e.rotational_kinetic
+                + e.elastic
                 + dissipated_total
                 - ledger.gravity_work
                 - ledger.wall_work,

@@ -56,7 +56,11 @@ impl RunSummary {
         );
         s += &format!("report:    {}\n", self.report_path.display());
         if let Some(rec) = &self.recording {
-            s += &format!("recording: {}  (open with the rerun viewer 0.36.3: `rerun {}`)\n", rec.display(), rec.display());
+            s += &format!(
+                "recording: {}  (open with the rerun viewer 0.36.3: `rerun {}`)\n",
+                rec.display(),
+                rec.display()
+            );
         }
         s
     }
@@ -262,7 +266,8 @@ pub fn run_scene(
     progress.finish_and_clear();
     let elapsed = start.elapsed().as_secs_f64();
     if recording.is_some() {
-        talus_rerun::finish(&mut sim.world).map_err(|e| RunError::Output(format!("recording: {e}")))?;
+        talus_rerun::finish(&mut sim.world)
+            .map_err(|e| RunError::Output(format!("recording: {e}")))?;
     }
 
     let timings = sim.world.resource::<StageTimings>();
@@ -289,7 +294,8 @@ pub fn run_scene(
                 .iter()
                 .map(|s| (s.name().to_string(), timings.get(*s)))
                 .collect(),
-            grain_steps_per_second: built.grain_count as f64 * steps_run as f64 / elapsed.max(1e-12),
+            grain_steps_per_second: built.grain_count as f64 * steps_run as f64
+                / elapsed.max(1e-12),
         },
         blow_up: None,
     };
@@ -308,7 +314,11 @@ pub fn run_scene(
             "run stopped at step {}: {}\nbodies involved: {}\nlast good state (step {}): {}",
             b.step,
             b.reason,
-            if bodies.is_empty() { "-".to_string() } else { bodies.join(", ") },
+            if bodies.is_empty() {
+                "-".to_string()
+            } else {
+                bodies.join(", ")
+            },
             last_good.as_ref().map(|s| s.step).unwrap_or(0),
             written.clone().unwrap_or_else(|| "none".into())
         ));
@@ -337,5 +347,6 @@ pub fn run_scene(
 fn write_json(path: &Path, value: &impl Serialize) -> Result<(), RunError> {
     let text = serde_json::to_string_pretty(value)
         .map_err(|e| RunError::Output(format!("cannot encode {}: {e}", path.display())))?;
-    std::fs::write(path, text).map_err(|e| RunError::Output(format!("cannot write {}: {e}", path.display())))
+    std::fs::write(path, text)
+        .map_err(|e| RunError::Output(format!("cannot write {}: {e}", path.display())))
 }

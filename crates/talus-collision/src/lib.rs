@@ -26,7 +26,15 @@ impl Plugin for CollisionPlugin {
         sim.world.insert_resource(CellGrid::default());
         sim.world.insert_resource(ContactIndex::default());
         sim.add_system(Stage::BroadPhase, "cell_grid", grid::build_cell_grid);
-        sim.add_system(Stage::NarrowPhase, "find_touching_pairs", narrow::find_touching_pairs);
-        sim.add_system(Stage::NarrowPhase, "update_contact_entities", narrow::update_contacts);
+        sim.add_system(
+            Stage::NarrowPhase,
+            "find_touching_pairs",
+            narrow::find_touching_pairs,
+        );
+        sim.add_system(
+            Stage::NarrowPhase,
+            "update_contact_entities",
+            narrow::update_contacts,
+        );
     }
 }

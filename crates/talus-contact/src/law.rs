@@ -91,7 +91,10 @@ pub trait LawDescriptor: Send + Sync {
     /// Whether the law can torque a grain with these parameters (so rotation is needed).
     fn produces_torque(&self, values: &ParamValues) -> bool;
     /// Resolves the typed parameters of one pair and its time scales.
-    fn resolve(&self, pair: &PairAssignment) -> Result<(Box<dyn Any + Send + Sync>, TimeScale), ParamError>;
+    fn resolve(
+        &self,
+        pair: &PairAssignment,
+    ) -> Result<(Box<dyn Any + Send + Sync>, TimeScale), ParamError>;
     /// Installs the law for the given pairs, with the typed parameters from [`Self::resolve`].
     fn install(&self, sim: &mut SimBuilder, pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)]);
 }
@@ -130,7 +133,10 @@ pub fn install_law<L: ContactLaw>(
 ) {
     let ids: Vec<usize> = {
         let mut channels = sim.world.resource_mut::<DissipationChannels>();
-        L::DISSIPATION.iter().map(|c| channels.register(c)).collect()
+        L::DISSIPATION
+            .iter()
+            .map(|c| channels.register(c))
+            .collect()
     };
     assert!(ids.iter().all(|&i| i < MAX_DISSIPATION_CHANNELS));
     let mut table = Vec::with_capacity(pairs.len());
@@ -140,7 +146,10 @@ pub fn install_law<L: ContactLaw>(
             .expect("resolve() returns this law's parameter type")
             .clone();
         table.push(params);
-        let n = sim.world.resource::<talus_core::resources::Materials>().len();
+        let n = sim
+            .world
+            .resource::<talus_core::resources::Materials>()
+            .len();
         let (a, b) = pair.materials;
         let mut law_table = sim.world.resource_mut::<ContactLawTable>();
         if law_table.slots.len() < n * n {
@@ -159,7 +168,11 @@ pub fn install_law<L: ContactLaw>(
         ids,
         _law: std::marker::PhantomData,
     });
-    sim.add_system(Stage::ContactForces, format!("law:{name}"), evaluate_law::<L>);
+    sim.add_system(
+        Stage::ContactForces,
+        format!("law:{name}"),
+        evaluate_law::<L>,
+    );
 }
 
 /// The laws a program knows, by name. The `talus` binary fills it from the plugin crates.
@@ -183,7 +196,10 @@ impl LawRegistry {
 
     /// Looks a law up by name.
     pub fn get(&self, name: &str) -> Option<&dyn LawDescriptor> {
-        self.laws.iter().find(|l| l.name() == name).map(|b| b.as_ref())
+        self.laws
+            .iter()
+            .find(|l| l.name() == name)
+            .map(|b| b.as_ref())
     }
 
     /// Names of all registered laws.

@@ -86,8 +86,16 @@ impl ParamRange {
 
     /// Whether `x` is allowed.
     pub fn contains(&self, x: f64) -> bool {
-        let lo = if self.min_inclusive { x >= self.min } else { x > self.min };
-        let hi = if self.max_inclusive { x <= self.max } else { x < self.max };
+        let lo = if self.min_inclusive {
+            x >= self.min
+        } else {
+            x > self.min
+        };
+        let hi = if self.max_inclusive {
+            x <= self.max
+        } else {
+            x < self.max
+        };
         x.is_finite() && lo && hi
     }
 }

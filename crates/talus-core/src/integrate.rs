@@ -48,7 +48,10 @@ pub fn kick_drift_translation(
             let partial: Vec<f64> = p
                 .par_chunks_mut(REDUCTION_CHUNK)
                 .zip(v.par_chunks_mut(REDUCTION_CHUNK))
-                .zip(f.par_chunks(REDUCTION_CHUNK).zip(m.par_chunks(REDUCTION_CHUNK)))
+                .zip(
+                    f.par_chunks(REDUCTION_CHUNK)
+                        .zip(m.par_chunks(REDUCTION_CHUNK)),
+                )
                 .map(|((p, v), (f, m))| {
                     p.iter_mut()
                         .zip(v.iter_mut())
@@ -102,7 +105,9 @@ fn rotation_kick(
             w.0 += t.0 * (kick / i.0);
         };
         if w.len() >= PARALLEL_THRESHOLD {
-            w.par_iter_mut().zip(t.par_iter().zip(i.par_iter())).for_each(update);
+            w.par_iter_mut()
+                .zip(t.par_iter().zip(i.par_iter()))
+                .for_each(update);
         } else {
             w.iter_mut().zip(t.iter().zip(i.iter())).for_each(update);
         }
@@ -123,7 +128,9 @@ pub fn second_kick_translation(
         let v = v.bypass_change_detection();
         let update = |(v, (f, m)): (&mut Velocity, (&Force, &Mass))| v.0 += f.0 * (kick / m.0);
         if v.len() >= PARALLEL_THRESHOLD {
-            v.par_iter_mut().zip(f.par_iter().zip(m.par_iter())).for_each(update);
+            v.par_iter_mut()
+                .zip(f.par_iter().zip(m.par_iter()))
+                .for_each(update);
         } else {
             v.iter_mut().zip(f.iter().zip(m.iter())).for_each(update);
         }

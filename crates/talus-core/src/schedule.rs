@@ -166,8 +166,16 @@ impl SimBuilder {
                 integrate::first_kick_rotation,
             );
         }
-        builder.add_system(Stage::IntegratePositions, "move_walls", integrate::move_walls);
-        builder.add_system(Stage::BroadPhase, "gather_snapshot", snapshot::gather_snapshot);
+        builder.add_system(
+            Stage::IntegratePositions,
+            "move_walls",
+            integrate::move_walls,
+        );
+        builder.add_system(
+            Stage::BroadPhase,
+            "gather_snapshot",
+            snapshot::gather_snapshot,
+        );
         if gravity_on {
             builder.add_system(Stage::BodyForces, "gravity", integrate::gravity);
         }
@@ -220,9 +228,7 @@ impl SimBuilder {
     }
 
     fn slot_count(&mut self, stage: Stage) -> u16 {
-        let counts = self
-            .world
-            .get_resource_or_insert_with(SlotCounts::default);
+        let counts = self.world.get_resource_or_insert_with(SlotCounts::default);
         counts.0[stage as usize]
     }
 

@@ -7,8 +7,7 @@ use std::any::Any;
 use glam::DVec3;
 use talus_collision::CollisionPlugin;
 use talus_contact::{
-    ContactPlugin, LawDescriptor, LawRegistry, PairAssignment, ParamValues, TimeScale,
-    check_params,
+    ContactPlugin, LawDescriptor, LawRegistry, PairAssignment, ParamValues, TimeScale, check_params,
 };
 use talus_core::prelude::*;
 
@@ -106,9 +105,15 @@ impl Scene {
             return Err(cx.err("gravity", "a z component of 0 in a 2-D scene"));
         }
         match (f.duration, f.steps) {
-            (Some(_), Some(_)) => return Err(cx.err("steps", "either `duration` or `steps`, not both")),
-            (None, None) => return Err(cx.err("duration", "a `duration` (s) or a number of `steps`")),
-            (Some(d), None) if !positive(d) => return Err(cx.err("duration", "a positive duration in seconds")),
+            (Some(_), Some(_)) => {
+                return Err(cx.err("steps", "either `duration` or `steps`, not both"));
+            }
+            (None, None) => {
+                return Err(cx.err("duration", "a `duration` (s) or a number of `steps`"));
+            }
+            (Some(d), None) if !positive(d) => {
+                return Err(cx.err("duration", "a positive duration in seconds"));
+            }
             (None, Some(0)) => return Err(cx.err("steps", "at least one step")),
             _ => {}
         }
@@ -121,7 +126,10 @@ impl Scene {
             return Err(cx.err("steps_per_collision", "a number ≥ 1"));
         }
         if !(f.initial_overlap_tolerance.is_finite() && f.initial_overlap_tolerance >= 0.0) {
-            return Err(cx.err("initial_overlap_tolerance", "a non-negative fraction of a radius"));
+            return Err(cx.err(
+                "initial_overlap_tolerance",
+                "a non-negative fraction of a radius",
+            ));
         }
         if let Some(e) = f.settle_kinetic_energy
             && !positive(e)
@@ -129,7 +137,10 @@ impl Scene {
             return Err(cx.err("settle_kinetic_energy", "a positive energy in joules"));
         }
         if !positive(f.output.recording_interval) {
-            return Err(cx.err("output.recording_interval", "a positive interval in seconds"));
+            return Err(cx.err(
+                "output.recording_interval",
+                "a positive interval in seconds",
+            ));
         }
         if !positive(f.output.report_interval) {
             return Err(cx.err("output.report_interval", "a positive interval in seconds"));
@@ -153,13 +164,25 @@ impl Scene {
         let mut materials = Vec::new();
         for (i, m) in f.materials.iter().enumerate() {
             if f.materials[..i].iter().any(|o| o.name == m.name) {
-                return Err(cx.err(&format!("materials[{i}].name"), "a name not used by another material"));
+                return Err(cx.err(
+                    &format!("materials[{i}].name"),
+                    "a name not used by another material",
+                ));
             }
             if !positive(m.density) {
-                return Err(cx.err(&format!("materials[{i}].density"), "a positive density in kg/m³"));
+                return Err(cx.err(
+                    &format!("materials[{i}].density"),
+                    "a positive density in kg/m³",
+                ));
             }
             if let Some(c) = &m.contact {
-                check_contact(&cx, registry, &f.plugins, c, &format!("materials[{i}].contact"))?;
+                check_contact(
+                    &cx,
+                    registry,
+                    &f.plugins,
+                    c,
+                    &format!("materials[{i}].contact"),
+                )?;
             }
             materials.push(Material {
                 name: m.name.clone(),
@@ -172,15 +195,31 @@ impl Scene {
                 .position(|m| m.name == name)
                 .map(|i| i as u16)
                 .ok_or_else(|| {
-                    let known: Vec<String> = f.materials.iter().map(|m| format!("`{}`", m.name)).collect();
-                    cx.err(field, format!("a material defined in `materials` ({}), found `{name}`", known.join(", ")))
+                    let known: Vec<String> = f
+                        .materials
+                        .iter()
+                        .map(|m| format!("`{}`", m.name))
+                        .collect();
+                    cx.err(
+                        field,
+                        format!(
+                            "a material defined in `materials` ({}), found `{name}`",
+                            known.join(", ")
+                        ),
+                    )
                 })
         };
         let mut overrides: Vec<(u16, u16, usize)> = Vec::new();
         for (k, p) in f.pairs.iter().enumerate() {
             let a = material_id(&p.materials.0, &format!("pairs[{k}].materials"))?;
             let b = material_id(&p.materials.1, &format!("pairs[{k}].materials"))?;
-            check_contact(&cx, registry, &f.plugins, &p.contact, &format!("pairs[{k}].contact"))?;
+            check_contact(
+                &cx,
+                registry,
+                &f.plugins,
+                &p.contact,
+                &format!("pairs[{k}].contact"),
+            )?;
             overrides.push((a.min(b), a.max(b), k));
         }
 
@@ -189,46 +228,78 @@ impl Scene {
         for (k, w) in f.walls.iter().enumerate() {
             let field = |s: &str| format!("walls[{k}].{s}");
             match w {
-                WallSpec::Plane { name, point, normal, material, velocity } => {
+                WallSpec::Plane {
+                    name,
+                    point,
+                    normal,
+                    material,
+                    velocity,
+                } => {
                     let mat = material_id(material, &field("material"))?;
                     let n = vec3(*normal);
                     if !n.is_finite() || n.length() == 0.0 {
                         return Err(cx.err(&field("normal"), "a non-zero normal vector"));
                     }
                     if two_d && (n.z != 0.0 || point[2] != 0.0 || velocity[2] != 0.0) {
-                        return Err(cx.err(&field("normal"), "a wall in the xy-plane (z components 0) in a 2-D scene"));
+                        return Err(cx.err(
+                            &field("normal"),
+                            "a wall in the xy-plane (z components 0) in a 2-D scene",
+                        ));
                     }
                     if !vec3(*point).is_finite() || !vec3(*velocity).is_finite() {
                         return Err(cx.err(&field("point"), "finite coordinates"));
                     }
-                    walls.push((k, WallBundle::new(name.clone(), vec3(*point), n, MaterialId(mat)).with_velocity(vec3(*velocity))));
+                    walls.push((
+                        k,
+                        WallBundle::new(name.clone(), vec3(*point), n, MaterialId(mat))
+                            .with_velocity(vec3(*velocity)),
+                    ));
                 }
-                WallSpec::Box { min, max, material, omit } => {
+                WallSpec::Box {
+                    min,
+                    max,
+                    material,
+                    omit,
+                } => {
                     let mat = material_id(material, &field("material"))?;
                     let (lo, hi) = (vec3(*min), vec3(*max));
                     let axes = if two_d { 2 } else { 3 };
                     if (0..axes).any(|d| !(lo[d] < hi[d])) || !lo.is_finite() || !hi.is_finite() {
-                        return Err(cx.err(&field("max"), "every component of `max` above that of `min`"));
+                        return Err(cx.err(
+                            &field("max"),
+                            "every component of `max` above that of `min`",
+                        ));
                     }
                     const FACES: [&str; 6] = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
                     for (j, o) in omit.iter().enumerate() {
                         if !FACES[..2 * axes].contains(&o.as_str()) {
-                            return Err(cx.err(&format!("walls[{k}].omit[{j}]"), format!("one of {}", FACES[..2 * axes].join(", "))));
+                            return Err(cx.err(
+                                &format!("walls[{k}].omit[{j}]"),
+                                format!("one of {}", FACES[..2 * axes].join(", ")),
+                            ));
                         }
                     }
                     for d in 0..axes {
                         let mut n = DVec3::ZERO;
                         n[d] = 1.0;
-                        let mid = if two_d { DVec3::new(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.0) } else { 0.5 * (lo + hi) };
+                        let mid = if two_d {
+                            DVec3::new(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.0)
+                        } else {
+                            0.5 * (lo + hi)
+                        };
                         let mut p_lo = mid;
                         p_lo[d] = lo[d];
                         let mut p_hi = mid;
                         p_hi[d] = hi[d];
                         if !omit.iter().any(|o| o == FACES[2 * d]) {
-                            walls.push((k, WallBundle::new(FACES[2 * d], p_lo, n, MaterialId(mat))));
+                            walls
+                                .push((k, WallBundle::new(FACES[2 * d], p_lo, n, MaterialId(mat))));
                         }
                         if !omit.iter().any(|o| o == FACES[2 * d + 1]) {
-                            walls.push((k, WallBundle::new(FACES[2 * d + 1], p_hi, -n, MaterialId(mat))));
+                            walls.push((
+                                k,
+                                WallBundle::new(FACES[2 * d + 1], p_hi, -n, MaterialId(mat)),
+                            ));
                         }
                     }
                 }
@@ -240,18 +311,36 @@ impl Scene {
         for (k, g) in f.grains.iter().enumerate() {
             let field = |s: &str| format!("grains[{k}].{s}");
             let material = match g {
-                GrainSource::List { material, grains: list } => {
+                GrainSource::List {
+                    material,
+                    grains: list,
+                } => {
                     for (j, s) in list.iter().enumerate() {
                         if !positive(s.radius) {
-                            return Err(cx.err(&format!("grains[{k}].grains[{j}].radius"), "a positive radius in metres"));
+                            return Err(cx.err(
+                                &format!("grains[{k}].grains[{j}].radius"),
+                                "a positive radius in metres",
+                            ));
                         }
-                        if !vec3(s.position).is_finite() || !vec3(s.velocity).is_finite() || !vec3(s.angular_velocity).is_finite() {
-                            return Err(cx.err(&format!("grains[{k}].grains[{j}]"), "finite position and velocities"));
+                        if !vec3(s.position).is_finite()
+                            || !vec3(s.velocity).is_finite()
+                            || !vec3(s.angular_velocity).is_finite()
+                        {
+                            return Err(cx.err(
+                                &format!("grains[{k}].grains[{j}]"),
+                                "finite position and velocities",
+                            ));
                         }
                     }
                     material
                 }
-                GrainSource::Lattice { material, radius, region, spacing, velocity } => {
+                GrainSource::Lattice {
+                    material,
+                    radius,
+                    region,
+                    spacing,
+                    velocity,
+                } => {
                     if !positive(*radius) {
                         return Err(cx.err(&field("radius"), "a positive radius in metres"));
                     }
@@ -266,7 +355,14 @@ impl Scene {
                     }
                     material
                 }
-                GrainSource::Random { material, region, count, radius, velocity_spread, .. } => {
+                GrainSource::Random {
+                    material,
+                    region,
+                    count,
+                    radius,
+                    velocity_spread,
+                    ..
+                } => {
                     check_region(&cx, region, &field("region"), two_d)?;
                     if *count == 0 {
                         return Err(cx.err(&field("count"), "at least one grain"));
@@ -275,7 +371,9 @@ impl Scene {
                         RadiusSpec::Fixed(r) if !positive(r) => {
                             return Err(cx.err(&field("radius"), "a positive radius in metres"));
                         }
-                        RadiusSpec::Uniform { min, max } if !(positive(min) && positive(max) && min <= max) => {
+                        RadiusSpec::Uniform { min, max }
+                            if !(positive(min) && positive(max) && min <= max) =>
+                        {
                             return Err(cx.err(&field("radius"), "radii with 0 < min ≤ max"));
                         }
                         _ => {}
@@ -287,7 +385,8 @@ impl Scene {
                 }
             };
             let mat = material_id(material, &field("material"))?;
-            let made = generate(g, k, mat, two_d).map_err(|(sub, expected)| cx.err(&field(&sub), expected))?;
+            let made = generate(g, k, mat, two_d)
+                .map_err(|(sub, expected)| cx.err(&field(&sub), expected))?;
             grains.extend(made);
         }
         if grains.is_empty() {
@@ -300,7 +399,8 @@ impl Scene {
         let mut lightest = vec![f64::INFINITY; n_mat];
         let mut smallest = vec![f64::INFINITY; n_mat];
         for g in &grains {
-            let (m, _) = mass_and_inertia(dimension, g.radius, materials[g.material as usize].density);
+            let (m, _) =
+                mass_and_inertia(dimension, g.radius, materials[g.material as usize].density);
             lightest[g.material as usize] = lightest[g.material as usize].min(m);
             smallest[g.material as usize] = smallest[g.material as usize].min(g.radius);
         }
@@ -315,14 +415,29 @@ impl Scene {
         let mut rotation = false;
         for a in 0..n_mat as u16 {
             for b in a..n_mat as u16 {
-                let (spec, field) = if let Some(&(_, _, k)) = overrides.iter().find(|o| o.0 == a && o.1 == b) {
+                let (spec, field) = if let Some(&(_, _, k)) =
+                    overrides.iter().find(|o| o.0 == a && o.1 == b)
+                {
                     (f.pairs[k].contact.clone(), format!("pairs[{k}].contact"))
                 } else {
-                    match (&f.materials[a as usize].contact, &f.materials[b as usize].contact) {
+                    match (
+                        &f.materials[a as usize].contact,
+                        &f.materials[b as usize].contact,
+                    ) {
                         (Some(x), Some(y)) if x.law == y.law => {
                             let law = registry.get(&x.law).expect("checked above");
-                            let mixed = ParamValues::mix(law.params(), &ParamValues(x.params.clone()), &ParamValues(y.params.clone()));
-                            (ContactSpec { law: x.law.clone(), params: mixed.0 }, format!("materials[{b}].contact"))
+                            let mixed = ParamValues::mix(
+                                law.params(),
+                                &ParamValues(x.params.clone()),
+                                &ParamValues(y.params.clone()),
+                            );
+                            (
+                                ContactSpec {
+                                    law: x.law.clone(),
+                                    params: mixed.0,
+                                },
+                                format!("materials[{b}].contact"),
+                            )
                         }
                         (Some(x), Some(y)) => {
                             return Err(cx.err(
@@ -363,7 +478,10 @@ impl Scene {
                     .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
                 let pair = PairAssignment {
                     materials: (a, b),
-                    names: (materials[a as usize].name.clone(), materials[b as usize].name.clone()),
+                    names: (
+                        materials[a as usize].name.clone(),
+                        materials[b as usize].name.clone(),
+                    ),
                     values,
                     min_effective_mass: min_mass,
                     min_effective_radius: min_radius,
@@ -374,15 +492,24 @@ impl Scene {
                     .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
                 rotation |= law.produces_torque(&pair.values);
                 let label = format!("{} for {}–{}", law.name(), pair.names.0, pair.names.1);
-                if time_scale.as_ref().is_none_or(|(t, _)| ts.contact_time < t.contact_time) {
+                if time_scale
+                    .as_ref()
+                    .is_none_or(|(t, _)| ts.contact_time < t.contact_time)
+                {
                     time_scale = Some((ts, label.clone()));
                 }
-                if stability.as_ref().is_none_or(|(s, _)| ts.stability_limit < *s) {
+                if stability
+                    .as_ref()
+                    .is_none_or(|(s, _)| ts.stability_limit < *s)
+                {
                     stability = Some((ts.stability_limit, label));
                 }
                 match installs.iter_mut().find(|i| i.law.name() == law.name()) {
                     Some(i) => i.pairs.push((pair, typed)),
-                    None => installs.push(LawInstall { law, pairs: vec![(pair, typed)] }),
+                    None => installs.push(LawInstall {
+                        law,
+                        pairs: vec![(pair, typed)],
+                    }),
                 }
             }
         }
@@ -416,7 +543,10 @@ impl Scene {
                 )
             }
             (None, None) => {
-                return Err(cx.err("time_step", "a time step: no material pair has a contact law to derive one from"));
+                return Err(cx.err(
+                    "time_step",
+                    "a time step: no material pair has a contact law to derive one from",
+                ));
             }
         };
         let steps = match (f.steps, f.duration) {
@@ -449,16 +579,32 @@ impl Scene {
         } else {
             "rotation: not integrated (no contact law in this scene can torque a grain)".to_string()
         });
-        builder.note(format!("steps: {steps}, grains: {}, walls: {}", grains.len(), walls.len()));
+        builder.note(format!(
+            "steps: {steps}, grains: {}, walls: {}",
+            grains.len(),
+            walls.len()
+        ));
         for (_, w) in walls {
             builder.world.spawn(w);
         }
         let grain_count = grains.len();
-        let densities: Vec<f64> = builder.world.resource::<Materials>().0.iter().map(|m| m.density).collect();
+        let densities: Vec<f64> = builder
+            .world
+            .resource::<Materials>()
+            .0
+            .iter()
+            .map(|m| m.density)
+            .collect();
         builder.world.spawn_batch(grains.into_iter().map(|g| {
-            GrainBundle::new(dimension, g.position, g.radius, densities[g.material as usize], MaterialId(g.material))
-                .with_velocity(g.velocity)
-                .with_angular_velocity(g.angular_velocity)
+            GrainBundle::new(
+                dimension,
+                g.position,
+                g.radius,
+                densities[g.material as usize],
+                MaterialId(g.material),
+            )
+            .with_velocity(g.velocity)
+            .with_angular_velocity(g.angular_velocity)
         }));
         Ok(BuiltScene {
             builder,
@@ -482,10 +628,16 @@ fn check_contact(
     field: &str,
 ) -> Result<(), SceneError> {
     let Some(law) = registry.get(&c.law) else {
-        return Err(cx.err(&format!("{field}.law"), format!("a registered contact law: {}", registry.names().join(", "))));
+        return Err(cx.err(
+            &format!("{field}.law"),
+            format!("a registered contact law: {}", registry.names().join(", ")),
+        ));
     };
     if !plugins.iter().any(|p| *p == c.law) {
-        return Err(cx.err(&format!("{field}.law"), format!("a law listed in `plugins` (add \"{}\" there)", c.law)));
+        return Err(cx.err(
+            &format!("{field}.law"),
+            format!("a law listed in `plugins` (add \"{}\" there)", c.law),
+        ));
     }
     let values = check_params(law.params(), &ParamValues(c.params.clone()))
         .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
@@ -495,8 +647,14 @@ fn check_contact(
 
 fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), SceneError> {
     let axes = if two_d { 2 } else { 3 };
-    if !vec3(r.min).is_finite() || !vec3(r.max).is_finite() || (0..axes).any(|d| !(r.min[d] < r.max[d])) {
-        return Err(cx.err(&format!("{field}.max"), "every component of `max` above that of `min`"));
+    if !vec3(r.min).is_finite()
+        || !vec3(r.max).is_finite()
+        || (0..axes).any(|d| !(r.min[d] < r.max[d]))
+    {
+        return Err(cx.err(
+            &format!("{field}.max"),
+            "every component of `max` above that of `min`",
+        ));
     }
     Ok(())
 }
@@ -523,8 +681,12 @@ fn check_initial_overlaps(
     }
     // Grain–grain overlaps on a cell grid.
     let rmax = grains.iter().map(|g| g.radius).fold(0.0, f64::max);
-    let lo = grains.iter().fold(DVec3::splat(f64::INFINITY), |a, g| a.min(g.position));
-    let hi = grains.iter().fold(DVec3::splat(f64::NEG_INFINITY), |a, g| a.max(g.position));
+    let lo = grains
+        .iter()
+        .fold(DVec3::splat(f64::INFINITY), |a, g| a.min(g.position));
+    let hi = grains
+        .iter()
+        .fold(DVec3::splat(f64::NEG_INFINITY), |a, g| a.max(g.position));
     let mut cell = 2.0 * rmax;
     let mut dims;
     loop {
@@ -537,7 +699,11 @@ fn check_initial_overlaps(
     let (nx, ny, nz) = (dims.x as usize, dims.y as usize, dims.z as usize);
     let coords = |p: DVec3| {
         let q = (p - lo) / cell;
-        ((q.x as usize).min(nx - 1), (q.y as usize).min(ny - 1), (q.z as usize).min(nz - 1))
+        (
+            (q.x as usize).min(nx - 1),
+            (q.y as usize).min(ny - 1),
+            (q.z as usize).min(nz - 1),
+        )
     };
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nx * ny * nz];
     for (i, g) in grains.iter().enumerate() {

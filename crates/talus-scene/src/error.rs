@@ -40,6 +40,7 @@ pub fn from_ron(path: &Path, source: &str, e: ron::error::SpannedError) -> Scene
     let pos = e.span.start;
     let locator = Locator::new(source);
     let enclosing = locator.field_at(pos.line, pos.col).unwrap_or_default();
+    let (mut line, mut column) = (pos.line, pos.col);
     let (field, expected) = match &e.code {
         E::NoSuchStructField {
             expected, found, ..
@@ -47,31 +48,39 @@ pub fn from_ron(path: &Path, source: &str, e: ron::error::SpannedError) -> Scene
             join(&enclosing_parent(&enclosing, found), found),
             format!("one of the fields {} (found `{found}`)", list(expected)),
         ),
-        E::MissingStructField { field, outer } => (
-            join(&enclosing, field),
-            format!(
-                "a required field `{field}`{}",
-                outer
-                    .as_ref()
-                    .map(|o| format!(" in {o}"))
-                    .unwrap_or_default()
-            ),
-        ),
+        E::MissingStructField { field, outer } => {
+            // ron reports the closing bracket; point at the struct that lacks the field.
+            let (group, start) = locator
+                .group_at(pos.line, pos.col)
+                .unwrap_or((String::new(), (pos.line, pos.col)));
+            (line, column) = start;
+            (
+                join(&group, field),
+                format!(
+                    "a required field `{field}`{}",
+                    outer
+                        .as_ref()
+                        .map(|o| format!(" in {o}"))
+                        .unwrap_or_default()
+                ),
+            )
+        }
         E::NoSuchEnumVariant {
             expected, found, ..
         } => (
             enclosing,
             format!("one of {} (found `{found}`)", list(expected)),
         ),
-        E::DuplicateStructField { field, .. } => {
-            (join(&enclosing, field), "each field at most once".to_string())
-        }
+        E::DuplicateStructField { field, .. } => (
+            join(&enclosing, field),
+            "each field at most once".to_string(),
+        ),
         other => (enclosing, format!("valid RON: {other}")),
     };
     SceneError {
         file: path.to_path_buf(),
-        line: pos.line,
-        column: pos.col,
+        line,
+        column,
         field,
         expected,
     }

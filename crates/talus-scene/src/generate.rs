@@ -64,7 +64,13 @@ pub fn generate(
             let a = spacing.unwrap_or(2.1 * radius);
             let lo = v(region.min) + DVec3::splat(*radius);
             let hi = v(region.max) - DVec3::splat(*radius);
-            let count = |l: f64, h: f64| if h < l { 0 } else { ((h - l) / a).floor() as usize + 1 };
+            let count = |l: f64, h: f64| {
+                if h < l {
+                    0
+                } else {
+                    ((h - l) / a).floor() as usize + 1
+                }
+            };
             let (nx, ny) = (count(lo.x, hi.x), count(lo.y, hi.y));
             let nz = if two_d { 1 } else { count(lo.z, hi.z) };
             if nx * ny * nz == 0 {
@@ -98,8 +104,8 @@ pub fn generate(
             seed,
             velocity_spread,
             ..
-        } => random_insertion(region, *count, radius, *seed, *velocity_spread, two_d)
-            .map(|grains| {
+        } => {
+            random_insertion(region, *count, radius, *seed, *velocity_spread, two_d).map(|grains| {
                 grains
                     .into_iter()
                     .map(|(p, r, vel)| GrainInit {
@@ -111,7 +117,8 @@ pub fn generate(
                         source: index,
                     })
                     .collect()
-            }),
+            })
+        }
     }
 }
 
@@ -132,9 +139,16 @@ fn random_insertion(
     let hi = v(region.max);
     let cell = 2.0 * rmax;
     let dims = ((hi - lo) / cell).floor().max(DVec3::ZERO) + DVec3::ONE;
-    let (nx, ny, nz) = (dims.x as usize, dims.y as usize, if two_d { 1 } else { dims.z as usize });
+    let (nx, ny, nz) = (
+        dims.x as usize,
+        dims.y as usize,
+        if two_d { 1 } else { dims.z as usize },
+    );
     if nx.saturating_mul(ny).saturating_mul(nz) > 50_000_000 {
-        return Err(("region".into(), "a region at most 5e7 grain diameters in volume".into()));
+        return Err((
+            "region".into(),
+            "a region at most 5e7 grain diameters in volume".into(),
+        ));
     }
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nx * ny * nz];
     let bin_of = |p: DVec3| {
@@ -156,14 +170,21 @@ fn random_insertion(
                 ),
             ));
         }
-        let r = if rmax > rmin { rng.random_range(rmin..=rmax) } else { rmin };
+        let r = if rmax > rmin {
+            rng.random_range(rmin..=rmax)
+        } else {
+            rmin
+        };
         let mut p = DVec3::ZERO;
         for d in 0..3 {
             let (a, b) = (lo[d] + r, hi[d] - r);
             if two_d && d == 2 {
                 p[d] = 0.0;
             } else if b < a {
-                return Err(("region".into(), "a region wider than the largest grain".into()));
+                return Err((
+                    "region".into(),
+                    "a region wider than the largest grain".into(),
+                ));
             } else {
                 p[d] = rng.random_range(a..=b);
             }

@@ -46,8 +46,8 @@ pub fn load(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
 /// Parses scene text; `path` is used in messages.
 pub fn parse(path: impl AsRef<Path>, source: &str) -> Result<Scene, SceneError> {
     let path = path.as_ref().to_path_buf();
-    let options = ron::Options::default()
-        .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+    let options =
+        ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
     match options.from_str::<SceneFile>(source) {
         Ok(file) => Ok(Scene {
             path,

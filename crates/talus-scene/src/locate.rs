@@ -8,6 +8,8 @@
 #[derive(Clone, Debug, Default)]
 pub struct Locator {
     entries: Vec<(String, usize, usize)>,
+    /// Bracketed groups: path, start (line, column), end (line, column) of the closer.
+    groups: Vec<(String, (usize, usize), (usize, usize))>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -150,6 +152,7 @@ struct Scanner {
     toks: Vec<Token>,
     at: usize,
     entries: Vec<(String, usize, usize)>,
+    groups: Vec<(String, (usize, usize), (usize, usize))>,
 }
 
 impl Scanner {
@@ -185,10 +188,17 @@ impl Scanner {
     /// Contents of a bracketed group up to and including `close`.
     fn group(&mut self, path: &str, close: char) {
         let mut index = 0usize;
+        let start = self
+            .at
+            .checked_sub(1)
+            .and_then(|i| self.toks.get(i))
+            .map(|t| (t.line, t.col))
+            .unwrap_or((1, 1));
         loop {
             let Some(t) = self.peek(0) else { return };
             match t.kind {
                 Tok::Close(_) => {
+                    self.groups.push((path.to_string(), start, (t.line, t.col)));
                     self.at += 1;
                     return;
                 }
@@ -229,6 +239,7 @@ impl Locator {
             toks: tokenize(src),
             at: 0,
             entries: Vec::new(),
+            groups: Vec::new(),
         };
         // A top-level struct may carry a name: `Scene( ... )`.
         s.value("");
@@ -241,7 +252,19 @@ impl Locator {
         let mut seen = std::collections::HashSet::new();
         entries.retain(|(p, ..)| seen.insert(p.clone()));
         entries.reverse();
-        Self { entries }
+        Self {
+            entries,
+            groups: s.groups,
+        }
+    }
+
+    /// The innermost bracketed value containing a position: its path and where it starts.
+    pub fn group_at(&self, line: usize, col: usize) -> Option<(String, (usize, usize))> {
+        self.groups
+            .iter()
+            .filter(|(_, start, end)| *start <= (line, col) && (line, col) <= *end)
+            .max_by_key(|(_, start, _)| *start)
+            .map(|(p, start, _)| (p.clone(), *start))
     }
 
     /// Line and column of a field's value; for a path that is not in the text (a
@@ -280,6 +303,9 @@ mod tests {
         assert_eq!(l.position("name"), (2, 9));
         assert_eq!(l.position("materials[0].contact.stiffness"), (4, 55));
         assert_eq!(l.position("materials[0].density"), (4, 5));
-        assert_eq!(l.field_at(4, 56).as_deref(), Some("materials[0].contact.stiffness"));
+        assert_eq!(
+            l.field_at(4, 56).as_deref(),
+            Some("materials[0].contact.stiffness")
+        );
     }
 }

@@ -122,7 +122,9 @@ impl<'de> Deserialize<'de> for ContactSpec {
                     } else {
                         let v = map.next_value::<f64>()?;
                         if params.iter().any(|(k, _)| *k == key) {
-                            return Err(de::Error::custom(format!("parameter `{key}` given twice")));
+                            return Err(de::Error::custom(format!(
+                                "parameter `{key}` given twice"
+                            )));
                         }
                         params.push((key, v));
                     }

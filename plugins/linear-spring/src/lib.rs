@@ -218,7 +218,10 @@ impl LinearSpringLaw {
             (Some(k), None) => k,
             (None, Some(tc)) => {
                 let e = restitution.ok_or_else(|| {
-                    err("restitution", "a restitution coefficient, required with `collision_time`")
+                    err(
+                        "restitution",
+                        "a restitution coefficient, required with `collision_time`",
+                    )
                 })?;
                 stiffness_from_collision_time(tc, e, min_mass)
             }
@@ -234,14 +237,19 @@ impl LinearSpringLaw {
             (Some(c), None) => NormalDamping::Coefficient(c),
             (None, Some(e)) => NormalDamping::Ratio(damping_ratio_from_restitution(e)),
             (Some(_), Some(_)) => {
-                return Err(err("damping", "either `damping` or `restitution`, not both"));
+                return Err(err(
+                    "damping",
+                    "either `damping` or `restitution`, not both",
+                ));
             }
             (None, None) => return Err(err("restitution", "`restitution` or `damping`")),
         };
         Ok(LinearParams {
             normal_stiffness: k,
             normal_damping: damping,
-            tangential_stiffness: k * values.get("tangential_stiffness_ratio").unwrap_or(2.0 / 7.0),
+            tangential_stiffness: k * values
+                .get("tangential_stiffness_ratio")
+                .unwrap_or(2.0 / 7.0),
             tangential_damping_ratio: values.get("tangential_damping_ratio").unwrap_or(0.0),
             friction: values.get("friction").unwrap_or(0.0),
         })
@@ -306,7 +314,11 @@ impl LawDescriptor for LinearSpringLaw {
         Ok((Box::new(p), Self::time_scale(&p, pair.min_effective_mass)))
     }
 
-    fn install(&self, sim: &mut SimBuilder, pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)]) {
+    fn install(
+        &self,
+        sim: &mut SimBuilder,
+        pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)],
+    ) {
         install_law::<LinearSpring>(sim, NAME, pairs);
     }
 }

@@ -1,0 +1,59 @@
+//! Helpers shared by the workspace-level tests: build scenes from text, read grains.
+#![allow(dead_code)]
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use talus::core::prelude::*;
+use talus::core::schedule::Simulation;
+
+/// Builds a simulation from scene text; returns it with its step count.
+pub fn build(text: &str) -> (Simulation, u64) {
+    let scene = talus::scene::parse("test-scene.ron", text).unwrap_or_else(|e| panic!("{e}"));
+    let built = scene
+        .build(&talus::registry())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let steps = built.stop.steps;
+    (built.builder.build(), steps)
+}
+
+/// State of one grain.
+#[derive(Clone, Copy, Debug)]
+pub struct GrainState {
+    pub position: DVec3,
+    pub velocity: DVec3,
+    pub omega: DVec3,
+    pub radius: f64,
+    pub mass: f64,
+}
+
+/// All grains, in query order.
+pub fn grains(sim: &mut Simulation) -> Vec<GrainState> {
+    let mut q = sim
+        .world
+        .query_filtered::<(&Position, &Velocity, &AngularVelocity, &Radius, &Mass), With<Grain>>();
+    q.iter(&sim.world)
+        .map(|(p, v, w, r, m)| GrainState {
+            position: p.0,
+            velocity: v.0,
+            omega: w.0,
+            radius: r.0,
+            mass: m.0,
+        })
+        .collect()
+}
+
+/// Instantaneous energies and ledger.
+pub fn energies(sim: &Simulation) -> (EnergySnapshot, EnergyLedger) {
+    (
+        sim.world.resource::<EnergySnapshot>().clone(),
+        sim.world.resource::<EnergyLedger>().clone(),
+    )
+}
+
+/// A fresh temporary folder for a test.
+pub fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("talus-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}

@@ -1,0 +1,102 @@
+//! Bad scenes fail before the run with the file, line, column and field, never a panic.
+
+use talus::scene::{SceneError, parse};
+
+const GOOD: &str = r#"Scene(
+    name: "ok",
+    steps: 10,
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 1e4, restitution: 0.5))],
+    grains: [List(material: "glass", grains: [(position: (0.0, 0.0, 0.0), radius: 0.01)])],
+)"#;
+
+fn error_of(text: &str) -> SceneError {
+    let outcome = std::panic::catch_unwind(|| {
+        parse("bad.ron", text).and_then(|s| s.build(&talus::registry()).map(|_| ()))
+    });
+    match outcome {
+        Ok(Err(e)) => e,
+        Ok(Ok(())) => panic!("scene was accepted:\n{text}"),
+        Err(_) => panic!("scene handling panicked:\n{text}"),
+    }
+}
+
+fn line_col_of(text: &str, needle: &str) -> (usize, usize) {
+    let at = text.find(needle).expect("needle in text");
+    let line = text[..at].matches('\n').count() + 1;
+    let col = at - text[..at].rfind('\n').map(|i| i + 1).unwrap_or(0) + 1;
+    (line, col)
+}
+
+#[test]
+fn the_good_scene_is_accepted() {
+    parse("good.ron", GOOD)
+        .unwrap()
+        .build(&talus::registry())
+        .unwrap();
+}
+
+#[test]
+fn misspelt_field() {
+    let text = GOOD.replace("density:", "densty:");
+    let e = error_of(&text);
+    assert_eq!(e.line, line_col_of(&text, "densty").0, "{e}");
+    assert!(e.column > 0);
+    assert!(e.field.contains("densty"), "{e}");
+    assert!(e.expected.contains("density"), "{e}");
+}
+
+#[test]
+fn negative_radius() {
+    let text = GOOD.replace("radius: 0.01", "radius: -0.01");
+    let e = error_of(&text);
+    assert_eq!((e.line, e.column), line_col_of(&text, "-0.01"), "{e}");
+    assert_eq!(e.field, "grains[0].grains[0].radius", "{e}");
+    assert!(e.expected.contains("positive"), "{e}");
+}
+
+#[test]
+fn missing_required_field() {
+    let text = GOOD.replace("density: 2500.0,", "");
+    let e = error_of(&text);
+    assert!(e.field.ends_with("density"), "{e}");
+    assert_eq!(e.line, line_col_of(&text, "(name: \"glass\"").0, "{e}");
+    assert!(e.column > 0);
+}
+
+#[test]
+fn restitution_out_of_range() {
+    let text = GOOD.replace("restitution: 0.5", "restitution: 1.5");
+    let e = error_of(&text);
+    assert_eq!((e.line, e.column), line_col_of(&text, "1.5"), "{e}");
+    assert_eq!(e.field, "materials[0].contact.restitution", "{e}");
+    assert!(e.expected.contains("(0, 1]"), "{e}");
+}
+
+#[test]
+fn not_ron_at_all() {
+    let text = "{ \"name\": \"json?\", ";
+    let e = error_of(text);
+    assert!(e.line >= 1 && e.column >= 1, "{e}");
+    assert!(e.to_string().starts_with("bad.ron:"), "{e}");
+}
+
+#[test]
+fn unknown_law_and_overlapping_grains_and_unstable_step() {
+    let e = error_of(&GOOD.replace(
+        "law: \"linear_spring\", stiffness",
+        "law: \"hooke\", stiffness",
+    ));
+    assert_eq!(e.field, "materials[0].contact.law", "{e}");
+    let text = GOOD.replace(
+        "(position: (0.0, 0.0, 0.0), radius: 0.01)",
+        "(position: (0.0, 0.0, 0.0), radius: 0.01), (position: (0.015, 0.0, 0.0), radius: 0.01)",
+    );
+    let e = error_of(&text);
+    assert_eq!(e.field, "grains[0]", "{e}");
+    assert!(e.expected.contains("overlap"), "{e}");
+    let e = error_of(&GOOD.replace("steps: 10,", "steps: 10, time_step: 1.0,"));
+    assert_eq!(e.field, "time_step", "{e}");
+    assert!(e.expected.contains("stability"), "{e}");
+}
