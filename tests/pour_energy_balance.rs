@@ -60,7 +60,7 @@ fn pour_energy_balance_error_converges_at_second_order() {
         std::fs::write(&path, small_pour(spc)).unwrap();
         errors.push(worst_balance_error(&run(&path, &format!("balance-{spc}"))));
     }
-    eprintln!("balance error at 50 and 100 steps per collision: {errors:e?}");
+    eprintln!("balance error at 50 and 100 steps per collision: {errors:?}");
     assert!(errors[0] < 2e-2, "{errors:?}");
     assert!(errors[0] / errors[1] > 3.0, "not second order: {errors:?}");
 }

@@ -301,7 +301,7 @@ mod tests {
         let src = "Scene(\n  name: \"x\", // c\n  materials: [\n    (name: \"a\", contact: (law: \"l\", stiffness: 1e5)),\n  ],\n)";
         let l = Locator::new(src);
         assert_eq!(l.position("name"), (2, 9));
-        assert_eq!(l.position("materials[0].contact.stiffness"), (4, 55));
+        assert_eq!(l.position("materials[0].contact.stiffness"), (4, 48));
         assert_eq!(l.position("materials[0].density"), (4, 5));
         assert_eq!(
             l.field_at(4, 56).as_deref(),
