@@ -149,6 +149,7 @@ pub struct PairSpec {
 
 /// A wall or a set of walls.
 #[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum WallSpec {
     /// An infinite plane.
     Plane {
@@ -180,6 +181,7 @@ pub enum WallSpec {
 
 /// A radius distribution.
 #[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum RadiusSpec {
     /// Every grain has this radius, m.
     Fixed(f64),
@@ -220,6 +222,7 @@ pub struct GrainSpec {
 
 /// Where grains come from.
 #[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub enum GrainSource {
     /// An explicit list.
     List {
