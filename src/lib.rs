@@ -13,6 +13,17 @@ pub use talus_scene as scene;
 /// Every contact law shipped with Talus, by name.
 pub fn registry() -> talus_contact::LawRegistry {
     let mut r = talus_contact::LawRegistry::new();
-    r.register(Box::new(talus_linear_spring::LinearSpringLaw));
+    talus_linear_spring::register(&mut r);
+    talus_hertz_mindlin::register(&mut r);
+    talus_linear_cohesion::register(&mut r);
+    // Rolling and twisting parts on top of each law assembled from sub-models.
+    {
+        use talus_linear_spring::parts::{CoulombSpring, LinearDashpot, LinearNormal};
+        talus_rolling_resistance::register_variants::<LinearNormal, LinearDashpot, CoulombSpring>(
+            &mut r,
+            talus_linear_spring::NAME,
+            talus_linear_spring::SUMMARY,
+        );
+    }
     r
 }

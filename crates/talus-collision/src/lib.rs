@@ -15,7 +15,11 @@ pub use grid::CellGrid;
 pub use narrow::ContactIndex;
 
 /// Installs the broad phase and the narrow phase.
-pub struct CollisionPlugin;
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CollisionPlugin {
+    /// Largest gap at which any contact law of the scene acts (cohesion beyond touch), m.
+    pub interaction_range: f64,
+}
 
 impl Plugin for CollisionPlugin {
     fn name(&self) -> String {
@@ -23,7 +27,9 @@ impl Plugin for CollisionPlugin {
     }
 
     fn build(&self, sim: &mut SimBuilder) {
-        sim.world.insert_resource(CellGrid::default());
+        let mut grid = CellGrid::default();
+        grid.interaction_range = self.interaction_range;
+        sim.world.insert_resource(grid);
         sim.world.insert_resource(ContactIndex::default());
         sim.add_system(Stage::BroadPhase, "cell_grid", grid::build_cell_grid);
         sim.add_system(

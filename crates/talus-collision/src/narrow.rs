@@ -5,7 +5,7 @@
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 use smallvec::SmallVec;
-use talus_contact::{Contact, ContactKind, systems::ContactLawTable};
+use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind, systems::ContactLawTable};
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
@@ -172,6 +172,16 @@ fn update_contacts_inner(
     for entries in per_grain.iter_mut() {
         entries.retain(|e| {
             if e.seen == pass {
+                return true;
+            }
+            // A pair that stopped touching keeps its contact for one more evaluation
+            // (with no force), so that the law books the work done in the step in
+            // which the contact ended; it goes at the next pass.
+            let acted = world
+                .get::<ContactGeometry>(e.contact)
+                .zip(world.get::<ContactForce>(e.contact))
+                .is_some_and(|(g, f)| f.is_active(g));
+            if acted {
                 true
             } else {
                 world.despawn(e.contact);

@@ -53,6 +53,14 @@ impl ContactForce {
     pub fn normal_force(&self, geometry: &ContactGeometry) -> f64 {
         self.force.dot(geometry.normal)
     }
+
+    /// Whether the contact acted at its last evaluation: its bodies overlap or it
+    /// carries a force. A contact whose bodies have just separated is kept for one
+    /// evaluation with no force, so that the law books the work of the step in which
+    /// it ended; it is not active then and is neither counted nor drawn.
+    pub fn is_active(&self, geometry: &ContactGeometry) -> bool {
+        geometry.overlap > 0.0 || self.force != DVec3::ZERO
+    }
 }
 
 /// Energy held and dissipated by a contact.
@@ -62,6 +70,12 @@ pub struct ContactEnergy {
     pub elastic: f64,
     /// Energy dissipated during the last step, per global dissipation channel, J.
     pub dissipated: [f64; MAX_DISSIPATION_CHANNELS],
+    /// Work done on grain `a` by a moving wall through this contact during the last
+    /// step, by the trapezoidal rule ½(F_old + F_new)·u_wall Δt (zero for grain pairs), J.
+    pub boundary_work: f64,
+    /// Energy created by the time integration at this contact during the last step,
+    /// as the law measured it ([`crate::ContactResponse::integration_error`]), J.
+    pub integration_error: f64,
 }
 
 /// The law's per-contact history, e.g. a tangential spring.

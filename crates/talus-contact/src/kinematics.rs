@@ -22,6 +22,12 @@ pub struct ContactKinematics {
     pub normal_velocity: f64,
     /// Tangential relative velocity at the contact point.
     pub tangential_velocity: DVec3,
+    /// Relative displacement of the contact point over the step just taken, m: the
+    /// half-step velocities times dt, with each grain's spin acting on the mean of its
+    /// branch vector before and after the step. This is the displacement on which the
+    /// integrator's trapezoidal rule makes the old and the new force work, so laws that
+    /// accumulate springs or dashpot work over it keep the energy balance second order.
+    pub displacement: DVec3,
     /// ω_a − ω_b (ω_a for walls).
     pub relative_omega: DVec3,
     /// Reduced mass m_a m_b / (m_a + m_b) (walls: m_a), kg.
@@ -33,6 +39,37 @@ pub struct ContactKinematics {
 }
 
 impl ContactKinematics {
+    /// Fills [`Self::displacement`] for a step `dt`, given the normal and overlap of the
+    /// previous evaluation (`previous_normal` zero for a new contact) and the spins.
+    /// Returns how much further the contact point moved with the old branch vectors
+    /// than with the new ones over the step (zero for a new contact), m.
+    #[inline]
+    pub fn set_displacement(
+        &mut self,
+        previous_normal: DVec3,
+        previous_overlap: f64,
+        omega_a: DVec3,
+        omega_b: DVec3,
+        dt: f64,
+    ) -> DVec3 {
+        if previous_normal == DVec3::ZERO {
+            self.displacement = self.relative_velocity * dt;
+            return DVec3::ZERO;
+        }
+        // Branch vectors are −n (R_a − δ/2) and n (R_b − δ/2).
+        let shift = 0.5 * (self.overlap - previous_overlap);
+        let old_a = -previous_normal * (self.branch_a.length() + shift);
+        let old_b = if self.branch_b == DVec3::ZERO {
+            DVec3::ZERO
+        } else {
+            previous_normal * (self.branch_b.length() + shift)
+        };
+        let correction = omega_a.cross(0.5 * (old_a - self.branch_a))
+            - omega_b.cross(0.5 * (old_b - self.branch_b));
+        self.displacement = (self.relative_velocity + correction) * dt;
+        2.0 * correction * dt
+    }
+
     /// Kinematics of grains `i` (a) and `j` (b) of the snapshot.
     #[inline]
     pub fn grain_grain(s: &GrainSnapshot, i: usize, j: usize) -> Self {
@@ -58,6 +95,7 @@ impl ContactKinematics {
             relative_velocity,
             normal_velocity,
             tangential_velocity: relative_velocity - normal * normal_velocity,
+            displacement: DVec3::ZERO,
             relative_omega: wa - wb,
             effective_mass: ma * mb / (ma + mb),
             effective_radius: ra * rb / (ra + rb),
@@ -86,6 +124,7 @@ impl ContactKinematics {
             relative_velocity,
             normal_velocity,
             tangential_velocity: relative_velocity - normal * normal_velocity,
+            displacement: DVec3::ZERO,
             relative_omega: wa,
             effective_mass: s.mass[i],
             effective_radius: ra,

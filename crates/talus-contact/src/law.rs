@@ -29,8 +29,14 @@ pub struct ContactResponse {
     pub torque_b: glam::DVec3,
     /// Elastic energy stored in the contact after this step, J.
     pub elastic_energy: f64,
-    /// Energy dissipated during this step, per entry of [`ContactLaw::DISSIPATION`], J.
+    /// Energy dissipated during this step, per entry of [`ContactLaw::dissipation`], J.
     pub dissipated: [f64; MAX_DISSIPATION_CHANNELS],
+    /// Energy the time integration created at this contact during this step, J: the
+    /// trapezoidal work of the law's conservative forces on the bodies (the rule the
+    /// integrator applies) plus the change of their potential energy. Zero in exact
+    /// arithmetic and continuous time; a law that leaves it at zero still closes the
+    /// balance up to its own integration error.
+    pub integration_error: f64,
 }
 
 /// A contact law's force routine.
@@ -39,8 +45,9 @@ pub trait ContactLaw: Send + Sync + 'static {
     type Params: Clone + Send + Sync + 'static;
     /// Per-contact history, created with `Default` when the contact starts.
     type History: Default + Clone + Send + Sync + 'static;
-    /// Names of the dissipation mechanisms, indexing [`ContactResponse::dissipated`].
-    const DISSIPATION: &'static [&'static str];
+    /// Names of the dissipation mechanisms, indexing [`ContactResponse::dissipated`]
+    /// (asked once, when the law is installed).
+    fn dissipation() -> Vec<&'static str>;
 
     /// Computes the response of one contact and updates its history over a step `dt`
     /// (`dt` is 0 in the priming pass that evaluates the initial forces).
@@ -65,8 +72,13 @@ pub struct PairAssignment {
     pub min_effective_mass: f64,
     /// Smallest reduced radius among those pairs, m.
     pub min_effective_radius: f64,
-    /// Whether the pair is a grain–wall pair only (no grain of one of the materials).
+    /// Dimension of the scene: 2 (disks in the xy-plane) or 3 (spheres).
     pub dimension: talus_core::resources::Dimension,
+    /// Each material's own parameters (defaults filled in) before mixing, when the pair's
+    /// law comes from its materials: a law whose pair parameter is not a per-field mix
+    /// (Hertz: 1/E* = (1 − ν_a²)/E_a + (1 − ν_b²)/E_b) computes it from these. `None`
+    /// when a `pairs` entry sets the pair's parameters directly.
+    pub material_values: Option<(ParamValues, ParamValues)>,
 }
 
 /// Time scales of a law for one pair: what the automatic time step is made from.
@@ -85,7 +97,24 @@ pub trait LawDescriptor: Send + Sync {
     /// One line for `talus check` and the docs.
     fn summary(&self) -> &'static str;
     /// Declared parameters.
-    fn params(&self) -> &'static [ParamSpec];
+    fn params(&self) -> &[ParamSpec];
+    /// The law's parts by kind and name, for `talus check` (empty for a law written whole).
+    fn parts(&self) -> Vec<(crate::compose::SubModelKind, &'static str)> {
+        Vec::new()
+    }
+    /// Name of the rolling-resistance part a scene selects with `rolling:`, if any.
+    fn rolling(&self) -> Option<&'static str> {
+        None
+    }
+    /// Name of the twisting-resistance part a scene selects with `twisting:`, if any.
+    fn twisting(&self) -> Option<&'static str> {
+        None
+    }
+    /// Gap up to which the law acts beyond touch, m (0: only while bodies overlap).
+    fn interaction_range(&self, values: &ParamValues) -> f64 {
+        let _ = values;
+        0.0
+    }
     /// Cross-field checks on a full parameter set (ranges are already checked).
     fn validate(&self, values: &ParamValues) -> Result<(), ParamError>;
     /// Whether the law can torque a grain with these parameters (so rotation is needed).
@@ -106,7 +135,7 @@ pub struct PairParams<L: ContactLaw>(pub Vec<L::Params>);
 /// Global dissipation channel ids of a law's mechanisms.
 #[derive(Resource)]
 pub struct LawChannels<L: ContactLaw> {
-    /// Global channel id of each entry of [`ContactLaw::DISSIPATION`].
+    /// Global channel id of each entry of [`ContactLaw::dissipation`].
     pub ids: Vec<usize>,
     _law: std::marker::PhantomData<fn() -> L>,
 }
@@ -133,12 +162,15 @@ pub fn install_law<L: ContactLaw>(
 ) {
     let ids: Vec<usize> = {
         let mut channels = sim.world.resource_mut::<DissipationChannels>();
-        L::DISSIPATION
+        L::dissipation()
             .iter()
             .map(|c| channels.register(c))
             .collect()
     };
-    assert!(ids.iter().all(|&i| i < MAX_DISSIPATION_CHANNELS));
+    assert!(
+        ids.iter().all(|&i| i < MAX_DISSIPATION_CHANNELS),
+        "a scene may use at most {MAX_DISSIPATION_CHANNELS} dissipation mechanisms"
+    );
     let mut table = Vec::with_capacity(pairs.len());
     for (slot, (pair, params)) in pairs.iter().enumerate() {
         let params = params
@@ -175,7 +207,7 @@ pub fn install_law<L: ContactLaw>(
     );
 }
 
-/// The laws a program knows, by name. The `talus` binary fills it from the plugin crates.
+/// The laws a program knows, by name and by the rolling and twisting parts a scene may add.
 #[derive(Default)]
 pub struct LawRegistry {
     laws: Vec<Box<dyn LawDescriptor>>,
@@ -187,23 +219,60 @@ impl LawRegistry {
         Self::default()
     }
 
-    /// Registers a law. A second law of the same name replaces the first.
+    /// Registers a law. A law of the same name and parts replaces the earlier one.
     pub fn register(&mut self, law: Box<dyn LawDescriptor>) -> &mut Self {
-        self.laws.retain(|l| l.name() != law.name());
+        self.laws.retain(|l| {
+            (l.name(), l.rolling(), l.twisting()) != (law.name(), law.rolling(), law.twisting())
+        });
         self.laws.push(law);
         self
     }
 
-    /// Looks a law up by name.
+    /// Looks a law up by name, without rolling or twisting part.
     pub fn get(&self, name: &str) -> Option<&dyn LawDescriptor> {
+        self.get_with(name, None, None)
+    }
+
+    /// Looks a law up by name and its optional rolling and twisting parts.
+    pub fn get_with(
+        &self,
+        name: &str,
+        rolling: Option<&str>,
+        twisting: Option<&str>,
+    ) -> Option<&dyn LawDescriptor> {
         self.laws
             .iter()
-            .find(|l| l.name() == name)
+            .find(|l| l.name() == name && l.rolling() == rolling && l.twisting() == twisting)
             .map(|b| b.as_ref())
     }
 
-    /// Names of all registered laws.
+    /// Whether any law of this name is registered (with any parts).
+    pub fn has(&self, name: &str) -> bool {
+        self.laws.iter().any(|l| l.name() == name)
+    }
+
+    /// The rolling (or, with `twisting`, twisting) parts registered for a law.
+    pub fn part_choices(&self, name: &str, twisting: bool) -> Vec<&'static str> {
+        let mut out: Vec<&'static str> = Vec::new();
+        for l in self.laws.iter().filter(|l| l.name() == name) {
+            let part = if twisting { l.twisting() } else { l.rolling() };
+            if let Some(p) = part
+                && !out.contains(&p)
+            {
+                out.push(p);
+            }
+        }
+        out
+    }
+
+    /// Names of all registered laws, each once, in registration order.
     pub fn names(&self) -> Vec<&'static str> {
-        self.laws.iter().map(|l| l.name()).collect()
+        let mut out: Vec<&'static str> = Vec::new();
+        for l in &self.laws {
+            if !out.contains(&l.name()) {
+                out.push(l.name());
+            }
+        }
+        out
     }
 }

@@ -4,15 +4,22 @@
 //! the geometry and force of the last evaluation, the energy it holds and dissipated,
 //! and the law's own per-contact history ([`LawState`]). The core never names a law:
 //! laws implement [`ContactLaw`] (the typed force routine) and [`LawDescriptor`]
-//! (parameters, validation and installation), and a scene picks them by name.
+//! (parameters, validation and installation), and a scene picks them by name. Laws are
+//! usually assembled from sub-models by kind ([`compose`]): normal, damping, tangential,
+//! rolling, twisting.
 
 pub mod components;
+pub mod compose;
 pub mod kinematics;
 pub mod law;
 pub mod params;
 pub mod systems;
 
 pub use components::*;
+pub use compose::{
+    Absent, ComposedHistory, ComposedLaw, ComposedParams, Composed, ContactState, Needs, NoCohesion, NoDamping,
+    NoRolling, NoTwisting, SubModel, SubModelKind,
+};
 pub use kinematics::ContactKinematics;
 pub use law::*;
 pub use params::*;

@@ -101,8 +101,19 @@ pub fn evaluate_law<L: ContactLaw>(
             .zip(e.par_iter_mut())
             .with_min_len(PARALLEL_MIN_LEN)
             .for_each(|((((c, h), g), f), e)| {
-                let kin = kinematics(snapshot, c);
+                let mut kin = kinematics(snapshot, c);
+                let (omega_a, omega_b) = spins(snapshot, c);
+                let branch_shift = kin.set_displacement(g.normal, g.overlap, omega_a, omega_b, dt);
+                let old_force = f.force;
                 let r = L::evaluate(&params[c.pair_slot as usize], &kin, &mut h.0, dt);
+                // The old force acted over the first half of the step, the new one acts
+                // over the second: the trapezoidal rule velocity Verlet integrates.
+                e.boundary_work = match c.kind {
+                    ContactKind::GrainWall => {
+                        0.5 * (f.force + r.force).dot(wall_velocity(snapshot, c.b)) * dt
+                    }
+                    ContactKind::GrainGrain => 0.0,
+                };
                 *g = ContactGeometry {
                     normal: kin.normal,
                     overlap: kin.overlap,
@@ -114,6 +125,10 @@ pub fn evaluate_law<L: ContactLaw>(
                     torque_b: kin.branch_b.cross(-r.force) + r.torque_b,
                 };
                 e.elastic = r.elastic_energy;
+                // The integrator turns the old force with the old branch vectors and the
+                // new force with the new ones; the law worked both over the mean.
+                e.integration_error =
+                    r.integration_error + 0.25 * (old_force - r.force).dot(branch_shift);
                 e.dissipated = [0.0; MAX_DISSIPATION_CHANNELS];
                 for (k, &id) in channel_ids.iter().enumerate() {
                     e.dissipated[id] = r.dissipated[k];
@@ -146,6 +161,29 @@ pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
     }
 }
 
+/// Spins of a contact's bodies (a wall does not spin).
+#[inline]
+fn spins(snapshot: &GrainSnapshot, c: &Contact) -> (DVec3, DVec3) {
+    let a = snapshot.omega[snapshot.dense(c.a).expect("contact grain in snapshot")];
+    let b = match c.kind {
+        ContactKind::GrainGrain => {
+            snapshot.omega[snapshot.dense(c.b).expect("contact grain in snapshot")]
+        }
+        ContactKind::GrainWall => DVec3::ZERO,
+    };
+    (a, b)
+}
+
+/// Velocity of a wall of the snapshot.
+#[inline]
+fn wall_velocity(snapshot: &GrainSnapshot, wall: Entity) -> DVec3 {
+    snapshot
+        .walls
+        .iter()
+        .find(|w| w.entity == wall)
+        .map_or(DVec3::ZERO, |w| w.velocity)
+}
+
 /// Scratch arrays of [`apply_contact_forces`], kept between steps to avoid allocation.
 #[derive(Default)]
 pub struct ForceAccumulators {
@@ -160,7 +198,6 @@ pub struct ForceAccumulators {
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn apply_contact_forces(
     snapshot: Res<GrainSnapshot>,
-    clock: Res<Clock>,
     channels: Res<DissipationChannels>,
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
@@ -179,8 +216,8 @@ pub fn apply_contact_forces(
     if ledger.dissipated.len() < channels.names.len() {
         ledger.dissipated.resize(channels.names.len(), 0.0);
     }
-    let dt = clock.pass_dt;
     let mut elastic = 0.0;
+    let mut integration_error = 0.0;
     let mut count = 0usize;
     let mut worst = 0.0f64;
     let mut worst_pair = None;
@@ -200,8 +237,8 @@ pub fn apply_contact_forces(
             ContactKind::GrainWall => {
                 if let Some(w) = snapshot.walls.iter().position(|w| w.entity == c.b) {
                     acc.wall_force[w] -= f.force;
-                    wall_work += f.force.dot(snapshot.walls[w].velocity) * dt;
                 }
+                wall_work += e.boundary_work;
                 g.overlap / snapshot.radius[i]
             }
         };
@@ -210,15 +247,17 @@ pub fn apply_contact_forces(
             worst_pair = Some((c.a, c.b));
         }
         elastic += e.elastic;
+        integration_error += e.integration_error;
         for (total, d) in dissipated.iter_mut().zip(e.dissipated.iter()) {
             *total += d;
         }
-        count += 1;
+        count += usize::from(f.is_active(g));
     }
     for (total, d) in ledger.dissipated.iter_mut().zip(dissipated.iter()) {
         *total += d;
     }
     ledger.wall_work += wall_work;
+    ledger.integration_error += integration_error;
     energy.elastic = elastic;
     energy.contacts = count;
     energy.max_overlap_ratio = worst;

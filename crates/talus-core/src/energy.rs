@@ -35,6 +35,11 @@ pub struct EnergyLedger {
     pub wall_work: f64,
     /// Energy dissipated so far, per channel of [`DissipationChannels`].
     pub dissipated: Vec<f64>,
+    /// Energy created so far by the time integration at contacts, as the laws measure
+    /// it (the trapezoidal work of their conservative forces plus the change of their
+    /// potential). Not a physical flow: the truncation error of the step, reported so
+    /// that the rest of the bookkeeping can be checked to rounding.
+    pub integration_error: f64,
 }
 
 impl EnergyLedger {
@@ -51,6 +56,10 @@ pub struct EnergySnapshot {
     pub translational_kinetic: f64,
     /// Σ ½ I ω².
     pub rotational_kinetic: f64,
+    /// Σ (½ m v₋·v₊ − ½ m v²) + the same for rotation: added to the kinetic energy, it
+    /// gives the kinetic energy whose change equals the trapezoidal work of the forces,
+    /// which is what velocity Verlet conserves; O(dt²), zero where forces balance, J.
+    pub kinetic_staggering: f64,
     /// Σ elastic energy stored in contacts.
     pub elastic: f64,
     /// Number of active contacts.

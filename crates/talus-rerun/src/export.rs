@@ -199,7 +199,7 @@ fn log_force_chains(
     s.strip_radii.clear();
     s.colors.clear();
     let mut max_force = 0.0f64;
-    for (c, g, f) in contacts.iter() {
+    for (c, g, f) in contacts.iter().filter(|(_, g, f)| f.is_active(g)) {
         // A contact's grain is always alive; fall back on the contact point anyway so
         // that every contact gets its strip.
         let centre = |e: Entity| grains.get(e).map_or(g.point, |(p, _, _)| p.0);

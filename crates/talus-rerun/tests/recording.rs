@@ -45,10 +45,11 @@ fn builder(dimension: Dimension, gravity: DVec3) -> SimBuilder {
         min_effective_mass: 1e-3,
         min_effective_radius: 1e-3,
         dimension,
+        material_values: None,
     };
     let (typed, _time_scale) = law.resolve(&pair).expect("valid parameters");
     law.install(&mut b, &[(pair, typed)]);
-    b.add_plugin(&talus_collision::CollisionPlugin);
+    b.add_plugin(&talus_collision::CollisionPlugin::default());
     b
 }
 

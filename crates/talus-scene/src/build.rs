@@ -12,6 +12,10 @@ use talus_contact::{
 use talus_core::prelude::*;
 
 use crate::Scene;
+
+/// Fraction of the stability bound the automatic time step stays below when a stiff
+/// part, not the contact time, limits it.
+pub const STABILITY_SAFETY: f64 = 0.2;
 use crate::error::SceneError;
 use crate::generate::{GrainInit, generate};
 use crate::locate::Locator;
@@ -146,7 +150,7 @@ impl Scene {
             return Err(cx.err("output.report_interval", "a positive interval in seconds"));
         }
         for (k, name) in f.plugins.iter().enumerate() {
-            if registry.get(name).is_none() {
+            if !registry.has(name) {
                 return Err(cx.err(
                     &format!("plugins[{k}]"),
                     format!("a known plugin: {}", registry.names().join(", ")),
@@ -413,8 +417,10 @@ impl Scene {
         let mut time_scale: Option<(TimeScale, String)> = None;
         let mut stability: Option<(f64, String)> = None;
         let mut rotation = false;
+        let mut interaction_range = 0.0f64;
         for a in 0..n_mat as u16 {
             for b in a..n_mat as u16 {
+                let mut sides: Option<(ContactSpec, ContactSpec)> = None;
                 let (spec, field) = if let Some(&(_, _, k)) =
                     overrides.iter().find(|o| o.0 == a && o.1 == b)
                 {
@@ -424,8 +430,12 @@ impl Scene {
                         &f.materials[a as usize].contact,
                         &f.materials[b as usize].contact,
                     ) {
-                        (Some(x), Some(y)) if x.law == y.law => {
-                            let law = registry.get(&x.law).expect("checked above");
+                        (Some(x), Some(y))
+                            if (&x.law, &x.rolling, &x.twisting)
+                                == (&y.law, &y.rolling, &y.twisting) =>
+                        {
+                            let law = lookup(registry, x).expect("checked above");
+                            sides = Some((x.clone(), y.clone()));
                             let mixed = ParamValues::mix(
                                 law.params(),
                                 &ParamValues(x.params.clone()),
@@ -433,8 +443,8 @@ impl Scene {
                             );
                             (
                                 ContactSpec {
-                                    law: x.law.clone(),
                                     params: mixed.0,
+                                    ..x.clone()
                                 },
                                 format!("materials[{b}].contact"),
                             )
@@ -443,13 +453,23 @@ impl Scene {
                             return Err(cx.err(
                                 &format!("materials[{b}].contact.law"),
                                 format!(
-                                    "the same law as material `{}` (`{}`, found `{}`), or a `pairs` entry for ({}, {})",
-                                    f.materials[a as usize].name, x.law, y.law, f.materials[a as usize].name, f.materials[b as usize].name
+                                    "the same law and parts as material `{}` ({}, found {}), or a `pairs` entry for ({}, {})",
+                                    f.materials[a as usize].name,
+                                    x.label(),
+                                    y.label(),
+                                    f.materials[a as usize].name,
+                                    f.materials[b as usize].name
                                 ),
                             ));
                         }
-                        (Some(x), None) => (x.clone(), format!("materials[{a}].contact")),
-                        (None, Some(y)) => (y.clone(), format!("materials[{b}].contact")),
+                        (Some(x), None) => {
+                            sides = Some((x.clone(), x.clone()));
+                            (x.clone(), format!("materials[{a}].contact"))
+                        }
+                        (None, Some(y)) => {
+                            sides = Some((y.clone(), y.clone()));
+                            (y.clone(), format!("materials[{b}].contact"))
+                        }
                         (None, None) => continue,
                     }
                 };
@@ -473,7 +493,7 @@ impl Scene {
                 if !min_mass.is_finite() {
                     continue; // no contact of this pair can occur
                 }
-                let law = registry.get(&spec.law).expect("checked above");
+                let law = lookup(registry, &spec).expect("checked above");
                 let values = check_params(law.params(), &ParamValues(spec.params.clone()))
                     .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
                 let pair = PairAssignment {
@@ -486,12 +506,33 @@ impl Scene {
                     min_effective_mass: min_mass,
                     min_effective_radius: min_radius,
                     dimension,
+                    material_values: match &sides {
+                        Some((x, y)) => Some((
+                            check_params(law.params(), &ParamValues(x.params.clone()))
+                                .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?,
+                            check_params(law.params(), &ParamValues(y.params.clone()))
+                                .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?,
+                        )),
+                        None => None,
+                    },
                 };
                 let (typed, ts) = law
                     .resolve(&pair)
                     .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
-                rotation |= law.produces_torque(&pair.values);
-                let label = format!("{} for {}–{}", law.name(), pair.names.0, pair.names.1);
+                interaction_range = interaction_range.max(law.interaction_range(&pair.values));
+                if law.produces_torque(&pair.values) {
+                    if f.rotation == Some(false) {
+                        return Err(cx.err(
+                            &format!("{field}.law"),
+                            format!(
+                                "a law that cannot torque grains, since the scene sets `rotation: false` ({} can: it needs grain rotation)",
+                                spec.label()
+                            ),
+                        ));
+                    }
+                    rotation = true;
+                }
+                let label = format!("{} for {}–{}", spec.label(), pair.names.0, pair.names.1);
                 if time_scale
                     .as_ref()
                     .is_none_or(|(t, _)| ts.contact_time < t.contact_time)
@@ -504,7 +545,7 @@ impl Scene {
                 {
                     stability = Some((ts.stability_limit, label));
                 }
-                match installs.iter_mut().find(|i| i.law.name() == law.name()) {
+                match installs.iter_mut().find(|i| std::ptr::addr_eq(i.law, law)) {
                     Some(i) => i.pairs.push((pair, typed)),
                     None => installs.push(LawInstall {
                         law,
@@ -532,15 +573,30 @@ impl Scene {
             }
             (None, Some((ts, label))) => {
                 let dt = ts.contact_time / f.steps_per_collision;
-                (
-                    dt,
-                    format!(
-                        "automatic: shortest contact time {:.4e} s ({label}) / {} steps per collision = {dt:.4e} s (stability bound {:.4e} s)",
-                        ts.contact_time,
-                        f.steps_per_collision,
-                        stability.as_ref().map(|s| s.0).unwrap_or(f64::INFINITY)
-                    ),
-                )
+                let (limit, limit_label) = stability
+                    .clone()
+                    .unwrap_or((f64::INFINITY, String::new()));
+                // A part stiffer than the normal spring (a rolling or tangential spring)
+                // can make the stability bound the tighter constraint; keep a margin of
+                // STABILITY_SAFETY below it.
+                if dt > STABILITY_SAFETY * limit {
+                    let dt = STABILITY_SAFETY * limit;
+                    (
+                        dt,
+                        format!(
+                            "automatic: {STABILITY_SAFETY} × stability bound {limit:.4e} s ({limit_label}) = {dt:.4e} s, below shortest contact time {:.4e} s ({label}) / {} steps per collision",
+                            ts.contact_time, f.steps_per_collision
+                        ),
+                    )
+                } else {
+                    (
+                        dt,
+                        format!(
+                            "automatic: shortest contact time {:.4e} s ({label}) / {} steps per collision = {dt:.4e} s (stability bound {limit:.4e} s)",
+                            ts.contact_time, f.steps_per_collision,
+                        ),
+                    )
+                }
             }
             (None, None) => {
                 return Err(cx.err(
@@ -555,6 +611,7 @@ impl Scene {
             _ => unreachable!("checked above"),
         };
 
+        let rotation = rotation || f.rotation == Some(true);
         let integrator = match f.integrator {
             IntegratorName::VelocityVerlet => Integrator::VelocityVerlet,
             IntegratorName::SymplecticEuler => Integrator::SymplecticEuler,
@@ -571,13 +628,23 @@ impl Scene {
         for install in &installs {
             builder.add_plugin(install);
         }
-        builder.add_plugin(&CollisionPlugin);
+        builder.add_plugin(&CollisionPlugin {
+            interaction_range,
+        });
+        if interaction_range > 0.0 {
+            builder.note(format!(
+                "interaction range beyond touch: {interaction_range:.4e} m (a contact law acts at a distance)"
+            ));
+        }
         builder.note(format!("time step: {time_step_reason}"));
         builder.note(format!("integrator: {integrator:?}"));
-        builder.note(if rotation {
-            "rotation: integrated (a contact law can torque grains)".to_string()
-        } else {
-            "rotation: not integrated (no contact law in this scene can torque a grain)".to_string()
+        builder.note(match (rotation, f.rotation) {
+            (true, Some(true)) => "rotation: integrated (the scene asks for it)".to_string(),
+            (true, _) => "rotation: integrated (a contact law can torque grains)".to_string(),
+            (false, Some(false)) => "rotation: not integrated (the scene turns it off)".to_string(),
+            (false, _) => {
+                "rotation: not integrated (no contact law in this scene can torque a grain)".to_string()
+            }
         });
         builder.note(format!(
             "steps: {steps}, grains: {}, walls: {}",
@@ -620,6 +687,11 @@ impl Scene {
     }
 }
 
+/// The registered law a contact spec names, with its rolling and twisting parts.
+fn lookup<'r>(registry: &'r LawRegistry, c: &ContactSpec) -> Option<&'r dyn LawDescriptor> {
+    registry.get_with(&c.law, c.rolling.as_deref(), c.twisting.as_deref())
+}
+
 fn check_contact(
     cx: &Ctx,
     registry: &LawRegistry,
@@ -627,18 +699,45 @@ fn check_contact(
     c: &ContactSpec,
     field: &str,
 ) -> Result<(), SceneError> {
-    let Some(law) = registry.get(&c.law) else {
+    if !registry.has(&c.law) {
         return Err(cx.err(
             &format!("{field}.law"),
             format!("a registered contact law: {}", registry.names().join(", ")),
         ));
-    };
+    }
     if !plugins.iter().any(|p| *p == c.law) {
         return Err(cx.err(
             &format!("{field}.law"),
             format!("a law listed in `plugins` (add \"{}\" there)", c.law),
         ));
     }
+    let Some(law) = lookup(registry, c) else {
+        // The law exists; one of its parts does not.
+        let part_error = |word: &str, twisting: bool, given: &Option<String>| {
+            let choices = registry.part_choices(&c.law, twisting);
+            let listed = if choices.is_empty() {
+                format!("nothing: `{}` has no {word} parts", c.law)
+            } else {
+                format!("one of {}", choices.iter().map(|p| format!("`{p}`")).collect::<Vec<_>>().join(", "))
+            };
+            cx.err(
+                &format!("{field}.{word}"),
+                format!(
+                    "a {word} part registered with `{}`: {listed}{}",
+                    c.law,
+                    given.as_ref().map(|g| format!(", found `{g}`")).unwrap_or_default()
+                ),
+            )
+        };
+        let rolling_known = c.rolling.as_deref().is_none_or(|r| {
+            registry.part_choices(&c.law, false).contains(&r)
+        });
+        return Err(if rolling_known {
+            part_error("twisting", true, &c.twisting)
+        } else {
+            part_error("rolling", false, &c.rolling)
+        });
+    };
     let values = check_params(law.params(), &ParamValues(c.params.clone()))
         .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
     law.validate(&values)

@@ -49,6 +49,10 @@ pub struct SceneFile {
     /// Integration scheme. Default: VelocityVerlet.
     #[serde(default)]
     pub integrator: IntegratorName,
+    /// Whether grain rotation is integrated. Default: automatic, on exactly when a
+    /// contact law of the scene can torque a grain. `false` with such a law is an error.
+    #[serde(default)]
+    pub rotation: Option<bool>,
     /// Plugins (contact laws) the scene uses, by name.
     #[serde(default)]
     pub plugins: Vec<String>,
@@ -96,13 +100,32 @@ pub struct MaterialSpec {
     pub contact: Option<ContactSpec>,
 }
 
-/// A contact law by name, with its parameters: `(law: "linear_spring", stiffness: 1e5, ...)`.
+/// A contact law by name, with its parameters: `(law: "linear_spring", stiffness: 1e5, ...)`,
+/// and optional rolling and twisting parts: `rolling: "constant_torque"`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ContactSpec {
     /// Law name.
     pub law: String,
+    /// Rolling-resistance part, by name.
+    pub rolling: Option<String>,
+    /// Twisting-resistance part, by name.
+    pub twisting: Option<String>,
     /// Numeric parameters in file order.
     pub params: Vec<(String, f64)>,
+}
+
+impl ContactSpec {
+    /// The law with its parts, as `talus check` and error messages show it.
+    pub fn label(&self) -> String {
+        let mut out = self.law.clone();
+        if let Some(r) = &self.rolling {
+            out.push_str(&format!(" + rolling `{r}`"));
+        }
+        if let Some(t) = &self.twisting {
+            out.push_str(&format!(" + twisting `{t}`"));
+        }
+        out
+    }
 }
 
 impl<'de> Deserialize<'de> for ContactSpec {
@@ -111,14 +134,22 @@ impl<'de> Deserialize<'de> for ContactSpec {
         impl<'de> Visitor<'de> for V {
             type Value = ContactSpec;
             fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-                f.write_str("a contact law: (law: \"name\", parameter: number, ...)")
+                f.write_str(
+                    "a contact law: (law: \"name\", rolling: \"part\", twisting: \"part\", parameter: number, ...)",
+                )
             }
             fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<ContactSpec, A::Error> {
                 let mut law = None;
+                let mut rolling = None;
+                let mut twisting = None;
                 let mut params = Vec::new();
                 while let Some(key) = map.next_key::<String>()? {
                     if key == "law" {
                         law = Some(map.next_value::<String>()?);
+                    } else if key == "rolling" {
+                        rolling = Some(map.next_value::<String>()?);
+                    } else if key == "twisting" {
+                        twisting = Some(map.next_value::<String>()?);
                     } else {
                         let v = map.next_value::<f64>()?;
                         if params.iter().any(|(k, _)| *k == key) {
@@ -130,7 +161,12 @@ impl<'de> Deserialize<'de> for ContactSpec {
                     }
                 }
                 let law = law.ok_or_else(|| de::Error::missing_field("law"))?;
-                Ok(ContactSpec { law, params })
+                Ok(ContactSpec {
+                    law,
+                    rolling,
+                    twisting,
+                    params,
+                })
             }
         }
         d.deserialize_struct("Contact", &["law"], V)

@@ -8,6 +8,8 @@
 //! is reset to the capped force. Energy: ½k_n δ² + ½k_t|ξ|² stored; dashpots and the
 //! slider dissipate, each reported on its own channel.
 
+pub mod parts;
+
 use std::any::Any;
 use std::f64::consts::PI;
 
@@ -17,6 +19,9 @@ use talus_core::schedule::SimBuilder;
 
 /// Name scenes use.
 pub const NAME: &str = "linear_spring";
+
+/// One line for `talus check` and the docs.
+pub const SUMMARY: &str = "linear spring–dashpot normal force, Coulomb-capped tangential spring";
 
 /// Normal damping of a pair.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,6 +58,8 @@ pub struct TangentialSpring {
     pub normal_dashpot: DVec3,
     /// Tangential dashpot force of the previous evaluation, N.
     pub tangential_dashpot: DVec3,
+    /// Normal spring force k_n δ n of the previous evaluation, N.
+    pub normal_spring: DVec3,
 }
 
 /// The law's force routine.
@@ -75,24 +82,43 @@ pub fn stiffness_from_collision_time(tc: f64, e: f64, m: f64) -> f64 {
 impl ContactLaw for LinearSpring {
     type Params = LinearParams;
     type History = TangentialSpring;
-    const DISSIPATION: &'static [&'static str] =
-        &["normal_damping", "tangential_damping", "friction_slip"];
+    fn dissipation() -> Vec<&'static str> {
+        vec!["normal_damping", "tangential_damping", "friction_slip"]
+    }
 
     #[inline]
     fn evaluate(
         p: &LinearParams,
         kin: &ContactKinematics,
         spring: &mut TangentialSpring,
-        dt: f64,
+        _dt: f64,
     ) -> ContactResponse {
         let mut out = ContactResponse::default();
         let delta = kin.overlap;
+        // Relative displacement of the contact point over this step.
+        let displacement = kin.displacement;
+        let tangential_displacement = displacement - kin.normal * kin.normal.dot(displacement);
         if delta <= 0.0 {
+            // The contact ended during this step. The dashpot forces of the last
+            // evaluation acted over its first half; the slider, whose cap μ|F_n| is
+            // now zero, releases what the tangential spring still held.
+            // The slip formula below with the spring reset to zero, so that the step's
+            // tangential work is booked by the same trapezoidal rule.
+            out.dissipated[0] += -0.5 * spring.normal_dashpot.dot(displacement);
+            out.dissipated[1] += -0.5 * spring.tangential_dashpot.dot(displacement);
+            let kt = p.tangential_stiffness;
+            let rotated = rotate_into_plane(spring.spring, kin.normal);
+            let trial = rotated + tangential_displacement;
+            out.dissipated[2] += 0.5 * kt * rotated.dot(trial);
+            // Integration error of the springs: their old forces worked over half of
+            // the step while their potential fell to zero.
+            let old_normal = spring.normal_spring;
+            out.integration_error = 0.5 * old_normal.dot(displacement)
+                - 0.5 * old_normal.length_squared() / p.normal_stiffness
+                + 0.5 * kt * (rotated.dot(tangential_displacement) - spring.spring.dot(displacement));
             *spring = TangentialSpring::default();
             return out;
         }
-        // Relative displacement of the contact point over this step (half-step velocity).
-        let displacement = kin.relative_velocity * dt;
         let n = kin.normal;
         let k = p.normal_stiffness;
         let c = match p.normal_damping {
@@ -103,48 +129,73 @@ impl ContactLaw for LinearSpring {
         let fn_mag = k * delta - c * vn;
         out.force = n * fn_mag;
         out.elastic_energy = 0.5 * k * delta * delta;
+        // Integration error of the normal spring: its trapezoidal work over the step
+        // plus the change of its potential. Zero while the normal keeps its direction;
+        // at the step a contact starts, the spring force works over the whole step
+        // although the bodies touched for part of it.
+        let normal_spring = n * (k * delta);
+        let old_normal = spring.normal_spring;
+        out.integration_error = 0.5 * (old_normal + normal_spring).dot(displacement)
+            + 0.5 * k * delta * delta
+            - 0.5 * old_normal.length_squared() / k;
+        spring.normal_spring = normal_spring;
         // Work of the dashpot by the trapezoidal rule over the step's displacement.
         let normal_dashpot = -c * vn * n;
-        out.dissipated[0] = -0.5 * (spring.normal_dashpot + normal_dashpot).dot(displacement);
+        out.dissipated[0] += -0.5 * (spring.normal_dashpot + normal_dashpot).dot(displacement);
         spring.normal_dashpot = normal_dashpot;
 
+        let mut ft = DVec3::ZERO;
         if p.friction > 0.0 {
             let kt = p.tangential_stiffness;
             let ct = p.tangential_damping_ratio * c;
             let vt = kin.tangential_velocity;
-            // Rotate the spring into the current tangent plane, keeping its length.
-            let old = spring.spring;
-            let old_len2 = old.length_squared();
-            let mut xi = old - n * n.dot(old);
-            let len2 = xi.length_squared();
-            if len2 > 0.0 {
-                xi *= (old_len2 / len2).sqrt();
-            }
-            xi += vt * dt;
-            let mut ft = -kt * xi - ct * vt;
+            let rotated = rotate_into_plane(spring.spring, n);
+            let mut xi = rotated + tangential_displacement;
+            ft = -kt * xi - ct * vt;
             let cap = p.friction * fn_mag.abs();
             let ft_len = ft.length();
-            let trial_elastic = 0.5 * kt * xi.length_squared();
             if ft_len > cap {
                 ft *= cap / ft_len;
-                // Reset the spring so that it carries the capped force.
+                // Reset the spring so that it carries the capped force; the rest of
+                // the step's tangential displacement slid.
+                let trial = xi;
                 xi = -(ft + ct * vt) / kt;
-                let capped_elastic = 0.5 * kt * xi.length_squared();
-                out.dissipated[2] = (trial_elastic - capped_elastic).max(0.0);
+                // Work of the slider force (the spring force, in series with it) along
+                // the slip, by the trapezoidal rule like every other term.
+                out.dissipated[2] += 0.5 * kt * (rotated + xi).dot(trial - xi);
             }
+            // Integration error of the tangential spring: the old spring force acted
+            // in the old tangent plane, the accounting above rotated it first.
+            out.integration_error +=
+                0.5 * kt * (rotated.dot(tangential_displacement) - spring.spring.dot(displacement));
             spring.spring = xi;
-            out.force += ft;
             out.elastic_energy += 0.5 * kt * xi.length_squared();
             let tangential_dashpot = -ct * vt;
-            out.dissipated[1] =
+            out.dissipated[1] +=
                 -0.5 * (spring.tangential_dashpot + tangential_dashpot).dot(displacement);
             spring.tangential_dashpot = tangential_dashpot;
         }
+        // Added even when zero: the composed form of this law does the same operations.
+        out.force += ft;
         out
     }
 }
 
-const PARAMS: &[ParamSpec] = &[
+/// Rotates a tangential spring into the tangent plane of normal `n`, keeping its length.
+#[inline]
+pub fn rotate_into_plane(spring: DVec3, n: DVec3) -> DVec3 {
+    let projected = spring - n * n.dot(spring);
+    let len2 = projected.length_squared();
+    if len2 > 0.0 {
+        projected * (spring.length_squared() / len2).sqrt()
+    } else {
+        projected
+    }
+}
+
+/// Declared parameters, in the order the parts of [`parts`] slice them: normal
+/// (stiffness, collision_time), damping (damping, restitution), tangential (the rest).
+pub(crate) const PARAMS: &[ParamSpec] = &[
     ParamSpec {
         name: "stiffness",
         unit: "N/m",
@@ -202,6 +253,13 @@ const PARAMS: &[ParamSpec] = &[
         mix: MixRule::Arithmetic,
     },
 ];
+
+/// Registers `linear_spring` (written whole) and `linear_spring_parts` (the same law
+/// assembled from [`parts`]).
+pub fn register(registry: &mut LawRegistry) {
+    registry.register(Box::new(LinearSpringLaw));
+    registry.register(Box::new(parts::composed_descriptor()));
+}
 
 /// What scenes see of the linear law.
 pub struct LinearSpringLaw;
@@ -290,10 +348,10 @@ impl LawDescriptor for LinearSpringLaw {
     }
 
     fn summary(&self) -> &'static str {
-        "linear spring–dashpot normal force, Coulomb-capped tangential spring"
+        SUMMARY
     }
 
-    fn params(&self) -> &'static [ParamSpec] {
+    fn params(&self) -> &[ParamSpec] {
         PARAMS
     }
 

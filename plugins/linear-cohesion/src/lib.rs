@@ -1,0 +1,6 @@
+//! Tutorial contact law: linear spring with linear cohesion (work in progress).
+
+use talus_contact::LawRegistry;
+
+/// Registers the laws of this plugin.
+pub fn register(_registry: &mut LawRegistry) {}

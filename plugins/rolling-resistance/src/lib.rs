@@ -1,0 +1,12 @@
+//! Rolling and twisting resistance sub-models (work in progress).
+
+use talus_contact::{LawRegistry, SubModel};
+
+/// Registers, for the law `name` made of normal `N`, damping `D` and tangential `T`
+/// parts, one variant per rolling and twisting part a scene may add.
+pub fn register_variants<N: SubModel, D: SubModel, T: SubModel>(
+    _registry: &mut LawRegistry,
+    _name: &'static str,
+    _summary: &'static str,
+) {
+}
