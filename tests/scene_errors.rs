@@ -100,3 +100,47 @@ fn unknown_law_and_overlapping_grains_and_unstable_step() {
     assert_eq!(e.field, "time_step", "{e}");
     assert!(e.expected.contains("stability"), "{e}");
 }
+
+#[test]
+fn rotation_off_with_a_law_that_torques_grains() {
+    let text = GOOD
+        .replace("restitution: 0.5))", "restitution: 0.5, friction: 0.4))")
+        .replace("steps: 10,", "steps: 10,\n    rotation: false,");
+    let e = error_of(&text);
+    assert!(e.field.ends_with(".law"), "{e}");
+    assert!(e.expected.contains("rotation"), "{e}");
+    assert!(e.line > 0, "{e}");
+}
+
+#[test]
+fn unknown_rolling_part() {
+    let text = GOOD.replace("restitution: 0.5))", "restitution: 0.5, rolling: \"sticky\"))");
+    let e = error_of(&text);
+    assert_eq!(e.field, "materials[0].contact.rolling", "{e}");
+    assert!(e.expected.contains("sticky"), "{e}");
+    assert_eq!(e.line, line_col_of(&text, "rolling").0, "{e}");
+}
+
+#[test]
+fn the_same_material_pair_twice() {
+    let text = GOOD.replacen(
+        "grains: [",
+        "pairs: [(materials: (\"glass\", \"glass\"), contact: (law: \"linear_spring\", stiffness: 1e4, restitution: 0.5)),\n        (materials: (\"glass\", \"glass\"), contact: (law: \"linear_spring\", stiffness: 2e4, restitution: 0.5))],\n    grains: [",
+        1,
+    );
+    let e = error_of(&text);
+    assert_eq!(e.field, "pairs[1].materials", "{e}");
+    assert!(e.expected.contains("pairs[0]"), "{e}");
+}
+
+#[test]
+fn two_walls_with_one_name() {
+    let text = GOOD.replacen(
+        "grains: [",
+        "walls: [Plane(name: \"floor\", point: (0.0, 0.0, -1.0), normal: (0.0, 0.0, 1.0), material: \"glass\"),\n        Plane(name: \"floor\", point: (0.0, 0.0, 1.0), normal: (0.0, 0.0, -1.0), material: \"glass\")],\n    grains: [",
+        1,
+    );
+    let e = error_of(&text);
+    assert_eq!(e.field, "walls[1].name", "{e}");
+    assert_eq!(e.line, line_col_of(&text, "Plane(name: \"floor\", point: (0.0, 0.0, 1.0)").0, "{e}");
+}

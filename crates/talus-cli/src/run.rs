@@ -309,7 +309,11 @@ pub fn run_scene(
             .map(|s| write_json(&state_path, s))
             .transpose()?
             .map(|_| state_path.display().to_string());
-        let bodies: Vec<String> = b.entities.iter().map(|e| format!("{e}")).collect();
+        let bodies: Vec<String> = b
+            .entities
+            .iter()
+            .map(|&e| describe_body(&sim.world, e))
+            .collect();
         blow_message = Some(format!(
             "run stopped at step {}: {}\nbodies involved: {}\nlast good state (step {}): {}",
             b.step,
@@ -342,6 +346,26 @@ pub fn run_scene(
         report_path,
         report,
     })
+}
+
+/// A body named for a person: a grain by its entity id (as in `last_good_state.json`),
+/// position and radius, a wall by its name.
+fn describe_body(world: &World, e: Entity) -> String {
+    if let Some(wall) = world.get::<Wall>(e) {
+        return format!("wall `{}`", wall.name);
+    }
+    match (world.get::<Position>(e), world.get::<Radius>(e)) {
+        (Some(p), Some(r)) => format!(
+            "grain {} (entity {}) at ({:.6e}, {:.6e}, {:.6e}) m, radius {:.4e} m",
+            e.index_u32(),
+            e.to_bits(),
+            p.0.x,
+            p.0.y,
+            p.0.z,
+            r.0
+        ),
+        _ => format!("entity {}", e.to_bits()),
+    }
 }
 
 fn write_json(path: &Path, value: &impl Serialize) -> Result<(), RunError> {

@@ -13,6 +13,10 @@ use talus_core::prelude::*;
 
 use crate::Scene;
 
+/// Most plane walls a scene may have (the narrow phase encodes wall indices in the
+/// top of the grain-index range).
+pub const MAX_WALLS: usize = 1024;
+
 /// Fraction of the stability bound the automatic time step stays below when a stiff
 /// part, not the contact time, limits it.
 pub const STABILITY_SAFETY: f64 = 0.2;
@@ -224,6 +228,12 @@ impl Scene {
                 &p.contact,
                 &format!("pairs[{k}].contact"),
             )?;
+            if let Some(&(_, _, j)) = overrides.iter().find(|o| (o.0, o.1) == (a.min(b), a.max(b))) {
+                return Err(cx.err(
+                    &format!("pairs[{k}].materials"),
+                    format!("a material pair not already given (pairs[{j}] sets the same pair)"),
+                ));
+            }
             overrides.push((a.min(b), a.max(b), k));
         }
 
@@ -283,6 +293,20 @@ impl Scene {
                             ));
                         }
                     }
+                    // Face names must be unique across walls: prefix them when the
+                    // scene has more than one box.
+                    let boxes = f
+                        .walls
+                        .iter()
+                        .filter(|w| matches!(w, WallSpec::Box { .. }))
+                        .count();
+                    let face = |j: usize| -> String {
+                        if boxes > 1 {
+                            format!("box{k}_{}", FACES[j])
+                        } else {
+                            FACES[j].to_string()
+                        }
+                    };
                     for d in 0..axes {
                         let mut n = DVec3::ZERO;
                         n[d] = 1.0;
@@ -296,17 +320,31 @@ impl Scene {
                         let mut p_hi = mid;
                         p_hi[d] = hi[d];
                         if !omit.iter().any(|o| o == FACES[2 * d]) {
-                            walls
-                                .push((k, WallBundle::new(FACES[2 * d], p_lo, n, MaterialId(mat))));
+                            walls.push((k, WallBundle::new(face(2 * d), p_lo, n, MaterialId(mat))));
                         }
                         if !omit.iter().any(|o| o == FACES[2 * d + 1]) {
                             walls.push((
                                 k,
-                                WallBundle::new(FACES[2 * d + 1], p_hi, -n, MaterialId(mat)),
+                                WallBundle::new(face(2 * d + 1), p_hi, -n, MaterialId(mat)),
                             ));
                         }
                     }
                 }
+            }
+        }
+
+        if walls.len() > MAX_WALLS {
+            return Err(cx.err(
+                "walls",
+                format!("at most {MAX_WALLS} plane walls, found {}", walls.len()),
+            ));
+        }
+        for (i, (k, w)) in walls.iter().enumerate() {
+            if let Some((j, _)) = walls[..i].iter().find(|(_, o)| o.wall.name == w.wall.name) {
+                return Err(cx.err(
+                    &format!("walls[{k}].name"),
+                    format!("a wall name not already used (`{}` is also walls[{j}])", w.wall.name),
+                ));
             }
         }
 
@@ -634,6 +672,34 @@ impl Scene {
         if interaction_range > 0.0 {
             builder.note(format!(
                 "interaction range beyond touch: {interaction_range:.4e} m (a contact law acts at a distance)"
+            ));
+        }
+        for install in &installs {
+            let law = install.law;
+            let parts: Vec<String> = law
+                .parts()
+                .iter()
+                .map(|(kind, name)| format!("{} `{name}`", kind.word()))
+                .collect();
+            let pairs: Vec<String> = install
+                .pairs
+                .iter()
+                .map(|(p, _)| format!("{}–{}", p.names.0, p.names.1))
+                .collect();
+            builder.note(format!(
+                "law `{}`{}: {}{} — pairs {}",
+                law.name(),
+                [("rolling", law.rolling()), ("twisting", law.twisting())]
+                    .iter()
+                    .filter_map(|(w, p)| p.map(|p| format!(" + {w} `{p}`")))
+                    .collect::<String>(),
+                law.summary(),
+                if parts.is_empty() {
+                    " (written whole)".to_string()
+                } else {
+                    format!(" (parts: {})", parts.join(", "))
+                },
+                pairs.join(", ")
             ));
         }
         builder.note(format!("time step: {time_step_reason}"));
