@@ -108,11 +108,20 @@ pub struct ContactState {
 }
 
 impl ContactState {
-    /// Total normal force: elastic + damping + cohesion, N (positive repulsive). This is
-    /// what friction and rolling caps are made from.
+    /// Normal force of the contact itself: elastic + damping, N (positive repulsive).
+    /// Friction and rolling caps are made from it. Cohesion is left out on purpose: its
+    /// pull loads the contact, which shows up as a larger elastic force (at a resting
+    /// bond k_n δ = f_pull), so the cap grows with adhesion as in DMT-type models instead of
+    /// vanishing where the pull balances the spring.
     #[inline]
     pub fn normal_force(&self) -> f64 {
-        self.normal_elastic + self.normal_damping + self.normal_cohesion
+        self.normal_elastic + self.normal_damping
+    }
+
+    /// Total normal force on body `a`: elastic + damping + cohesion, N.
+    #[inline]
+    pub fn total_normal_force(&self) -> f64 {
+        self.normal_force() + self.normal_cohesion
     }
 
     /// Books `energy` on the part's own dissipation channel `k` (an index into its
@@ -378,7 +387,7 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
         s.channel_base = b[5];
         W::evaluate(&p.twisting, kin, &mut h.twisting, &mut s, dt);
         ContactResponse {
-            force: kin.normal * s.normal_force() + s.tangential_force,
+            force: kin.normal * s.total_normal_force() + s.tangential_force,
             torque_a: s.torque_a,
             torque_b: s.torque_b,
             elastic_energy: s.elastic_energy,
