@@ -18,11 +18,17 @@ pub fn registry() -> talus_contact::LawRegistry {
     talus_linear_cohesion::register(&mut r);
     // Rolling and twisting parts on top of each law assembled from sub-models.
     {
+        use talus_hertz_mindlin::{HertzDamping, HertzNormal, MindlinTangential};
         use talus_linear_spring::parts::{CoulombSpring, LinearDashpot, LinearNormal};
         talus_rolling_resistance::register_variants::<LinearNormal, LinearDashpot, CoulombSpring>(
             &mut r,
             talus_linear_spring::NAME,
             talus_linear_spring::SUMMARY,
+        );
+        talus_rolling_resistance::register_variants::<HertzNormal, HertzDamping, MindlinTangential>(
+            &mut r,
+            talus_hertz_mindlin::NAME,
+            talus_hertz_mindlin::SUMMARY,
         );
     }
     r

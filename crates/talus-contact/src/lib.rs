@@ -18,7 +18,7 @@ pub mod systems;
 pub use components::*;
 pub use compose::{
     Absent, ComposedHistory, ComposedLaw, ComposedParams, Composed, ContactState, Needs, NoCohesion, NoDamping,
-    NoRolling, NoTwisting, SubModel, SubModelKind,
+    NoRolling, NoTwisting, SubModel, SubModelKind, is_two_dimensional,
 };
 pub use kinematics::ContactKinematics;
 pub use law::*;
