@@ -79,6 +79,42 @@ pub fn stiffness_from_collision_time(tc: f64, e: f64, m: f64) -> f64 {
     m * (PI * PI + l * l) / (tc * tc)
 }
 
+/// Dashpot coefficient c = 2ζ√(m k) that gives restitution `e` to a pair of reduced mass
+/// `m` and stiffness `k` (MercuryDPM's `setCollisionTimeAndRestitutionCoefficient` pairs
+/// this with [`stiffness_from_collision_time`]).
+pub fn damping_from_restitution(e: f64, k: f64, m: f64) -> f64 {
+    2.0 * damping_ratio_from_restitution(e) * (m * k).sqrt()
+}
+
+/// Duration of a binary collision of reduced mass `m` with stiffness `k` and dashpot `c`,
+/// the dashpot acting until the overlap closes: π / √(k/m − (c/2m)²); infinite when
+/// overdamped.
+pub fn collision_time(k: f64, c: f64, m: f64) -> f64 {
+    let w2 = k / m - (c / (2.0 * m)).powi(2);
+    if w2 > 0.0 { PI / w2.sqrt() } else { f64::INFINITY }
+}
+
+/// Restitution of that collision: exp(−ζπ/√(1 − ζ²)), ζ = c / (2√(m k)); 0 when
+/// overdamped.
+pub fn restitution(k: f64, c: f64, m: f64) -> f64 {
+    let zeta = c / (2.0 * (m * k).sqrt());
+    if zeta < 1.0 {
+        (-zeta * PI / (1.0 - zeta * zeta).sqrt()).exp()
+    } else {
+        0.0
+    }
+}
+
+/// The time step that resolves a collision of reduced mass `m`, stiffness `k` and dashpot
+/// `c` with `steps` steps (what the automatic step does with `steps_per_collision`), kept
+/// below 0.2 × the stability limit (2/ω₀)(√(1 + ζ²) − ζ) of the central-difference scheme.
+pub fn time_step(k: f64, c: f64, m: f64, steps: f64) -> f64 {
+    let omega0 = (k / m).sqrt();
+    let zeta = c / (2.0 * (m * k).sqrt());
+    let stability = 2.0 / omega0 * ((1.0 + zeta * zeta).sqrt() - zeta);
+    (collision_time(k, c, m) / steps).min(0.2 * stability)
+}
+
 impl ContactLaw for LinearSpring {
     type Params = LinearParams;
     type History = TangentialSpring;
@@ -378,5 +414,26 @@ impl LawDescriptor for LinearSpringLaw {
         pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)],
     ) {
         install_law::<LinearSpring>(sim, NAME, pairs);
+    }
+}
+
+#[cfg(test)]
+mod helper_tests {
+    use super::*;
+
+    /// The helpers invert each other: a stiffness and a dashpot made from (t_c, e) give
+    /// back that collision time and restitution.
+    #[test]
+    fn parameter_helpers_are_consistent() {
+        let m = 2.5e-3;
+        for (tc, e) in [(1e-4, 0.3), (5e-3, 0.9), (1e-2, 1.0)] {
+            let k = stiffness_from_collision_time(tc, e, m);
+            let c = damping_from_restitution(e, k, m);
+            assert!((collision_time(k, c, m) - tc).abs() < 1e-12 * tc);
+            assert!((restitution(k, c, m) - e).abs() < 1e-12);
+            assert!((time_step(k, c, m, 50.0) - tc / 50.0).abs() < 1e-12 * tc);
+        }
+        assert_eq!(restitution(1.0, 10.0, 1.0), 0.0);
+        assert!(collision_time(1.0, 10.0, 1.0).is_infinite());
     }
 }
