@@ -1,4 +1,5 @@
-//! The JSON run report: what ran, how long each stage took, and the energy series.
+//! The JSON run report: what ran, how long each stage took, the energy series, and the
+//! stress series when the scene samples stresses.
 //! Its format is documented in `docs/report-format.md`.
 
 use std::collections::BTreeMap;
@@ -6,6 +7,7 @@ use std::collections::BTreeMap;
 use bevy_ecs::prelude::*;
 use serde::{Deserialize, Serialize};
 use talus_core::prelude::*;
+use talus_stress::{StressRecord, StressSample};
 
 /// One sample of the energy series.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -44,6 +46,10 @@ pub struct ReportSample {
     pub contacts: usize,
     /// Largest overlap / radius.
     pub max_overlap_ratio: f64,
+    /// The most recent stress sample (its own `step` says when it was taken), present
+    /// only when the scene has a `sampling` section.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stress: Option<StressSample>,
 }
 
 impl ReportSample {
@@ -82,6 +88,9 @@ impl ReportSample {
             bookkeeping_balance: balance - ledger.integration_error,
             contacts: e.contacts,
             max_overlap_ratio: e.max_overlap_ratio,
+            stress: world
+                .get_resource::<StressRecord>()
+                .and_then(|r| r.latest.clone()),
         }
     }
 

@@ -1,16 +1,20 @@
 //! The export system: logs grains, force chains, walls and energy statistics of one
-//! step into the recording.
+//! step into the recording, and each new stress sample as scalars under `stress/`.
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rerun::{EntityPath, EntityPathPart};
 use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind};
 use talus_core::prelude::*;
+use talus_stress::{RegionStress, StressRecord, StressSample};
 
 use crate::{
     FORCE_CHAINS_PATH, GRAINS_PATH, RerunRecorder, STATS_PATH, STEP_TIMELINE, TIME_TIMELINE,
     WALLS_PATH,
 };
+
+/// Parent entity path of the stress scalars (`stress/<region>/<quantity>`).
+pub const STRESS_PATH: &str = "stress";
 
 /// Smallest force-chain radius, as a fraction of the mean grain radius.
 const MIN_CHAIN_RADIUS: f32 = 0.02;
@@ -41,7 +45,32 @@ pub(crate) struct ExportState {
     strips: Vec<[[f32; 3]; 2]>,
     normal_forces: Vec<f64>,
     strip_radii: Vec<f32>,
+    /// `stress/<region>/<quantity>` paths, per region, in [`STRESS_SCALARS`] order.
+    stress_paths: Vec<Vec<EntityPath>>,
+    /// [`StressRecord::taken`] of the last stress sample logged.
+    stress_logged: u64,
 }
+
+/// Scalars logged per stress region, under `stress/<region>/`.
+const STRESS_SCALARS: [&str; 17] = [
+    "pressure",
+    "shear_stress",
+    "kinetic_share",
+    "solid_fraction",
+    "antisymmetric_norm",
+    "couple_stress_norm",
+    "shear_rate",
+    "inertial_number",
+    "sigma_xx",
+    "sigma_yy",
+    "sigma_zz",
+    "sigma_xy",
+    "sigma_yx",
+    "sigma_xz",
+    "sigma_zx",
+    "sigma_yz",
+    "sigma_zy",
+];
 
 /// Fixed scalar statistics, in the order of [`ExportState::stats_paths`].
 const STATS: [&str; 7] = [
@@ -68,10 +97,25 @@ pub fn rerun_export(
     grains: Query<(&Position, &Velocity, &Radius), With<Grain>>,
     contacts: Query<(&Contact, &ContactGeometry, &ContactForce)>,
     walls: Query<(Entity, &Wall)>,
+    stress: Option<Res<StressRecord>>,
 ) {
     let Some(mut recorder) = recorder else {
         return;
     };
+    // Stress samples are logged when they are taken, whatever the frame period.
+    if let Some(record) = stress
+        && let Some(sample) = &record.latest
+        && record.taken != recorder.state.stress_logged
+    {
+        let recorder = &mut *recorder;
+        recorder.state.stress_logged = record.taken;
+        let planar = config.dimension == Dimension::Two;
+        if let Err(e) = log_stress(&recorder.stream, &mut recorder.state, sample, planar)
+            && recorder.error.is_none()
+        {
+            recorder.error = Some(format!("rerun stress export at step {}: {e}", clock.step));
+        }
+    }
     if !clock.step.is_multiple_of(recorder.every) {
         return;
     }
@@ -313,6 +357,70 @@ fn log_stats(
         rec.log(path.clone(), &rerun::Scalars::single(value))?;
     }
     Ok(())
+}
+
+/// Logs one stress sample as scalars `stress/<region>/<quantity>` ([`STRESS_SCALARS`]);
+/// optional quantities are logged only when defined, and in 2-D only the in-plane
+/// components `sigma_xx`, `sigma_yy`, `sigma_xy`, `sigma_yx`.
+fn log_stress(
+    rec: &rerun::RecordingStream,
+    s: &mut ExportState,
+    sample: &StressSample,
+    planar: bool,
+) -> rerun::RecordingStreamResult<()> {
+    rec.set_time_sequence(STEP_TIMELINE, sample.step as i64);
+    rec.set_duration_secs(TIME_TIMELINE, sample.time);
+    if s.stress_paths.len() != sample.regions.len() {
+        s.stress_paths = sample
+            .regions
+            .iter()
+            .map(|r| {
+                STRESS_SCALARS
+                    .iter()
+                    .map(|q| {
+                        EntityPath::new(vec![
+                            STRESS_PATH.into(),
+                            EntityPathPart::new(r.name.as_str()),
+                            (*q).into(),
+                        ])
+                    })
+                    .collect()
+            })
+            .collect();
+    }
+    for (region, paths) in sample.regions.iter().zip(&s.stress_paths) {
+        for (k, path) in paths.iter().enumerate() {
+            if let Some(value) = stress_scalar(region, k, planar) {
+                rec.log(path.clone(), &rerun::Scalars::single(value))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Value of entry `k` of [`STRESS_SCALARS`] for a region, if defined.
+fn stress_scalar(r: &RegionStress, k: usize, planar: bool) -> Option<f64> {
+    let sigma = |i: usize, j: usize| (!planar || (i < 2 && j < 2)).then_some(r.stress.0[i][j]);
+    match k {
+        0 => Some(r.pressure),
+        1 => Some(r.shear_stress),
+        2 => r.kinetic_share,
+        3 => Some(r.solid_fraction),
+        4 => Some(r.antisymmetric_norm),
+        5 => r.couple_stress.map(|c| c.norm()),
+        6 => r.shear_rate,
+        7 => r.inertial_number,
+        8 => sigma(0, 0),
+        9 => sigma(1, 1),
+        10 => sigma(2, 2),
+        11 => sigma(0, 1),
+        12 => sigma(1, 0),
+        13 => sigma(0, 2),
+        14 => sigma(2, 0),
+        15 => sigma(1, 2),
+        16 => sigma(2, 1),
+        _ => None,
+    }
 }
 
 /// Closed outline of a wall: a square of half-side `half` in its plane (3-D), or a

@@ -10,8 +10,12 @@ use talus_contact::{
     ContactPlugin, LawDescriptor, LawRegistry, PairAssignment, ParamValues, TimeScale, check_params,
 };
 use talus_core::prelude::*;
+use talus_stress::{RegionShape, RegionSpec, StressPlugin};
 
 use crate::Scene;
+
+/// Name under which the whole domain is reported when `sampling.domain` is true.
+pub const DOMAIN_REGION: &str = "domain";
 
 /// Most plane walls a scene may have (the narrow phase encodes wall indices in the
 /// top of the grain-index range).
@@ -153,6 +157,10 @@ impl Scene {
         if !positive(f.output.report_interval) {
             return Err(cx.err("output.report_interval", "a positive interval in seconds"));
         }
+        let sampling_regions = match &f.sampling {
+            Some(s) => Some(check_sampling(&cx, s, two_d)?),
+            None => None,
+        };
         for (k, name) in f.plugins.iter().enumerate() {
             if !registry.has(name) {
                 return Err(cx.err(
@@ -669,6 +677,14 @@ impl Scene {
         builder.add_plugin(&CollisionPlugin {
             interaction_range,
         });
+        // Stress sampling only when the scene asks for it: otherwise no system is added.
+        if let (Some(spec), Some(regions)) = (&f.sampling, sampling_regions) {
+            let interval = spec.interval.unwrap_or(f.output.report_interval);
+            builder.add_plugin(&StressPlugin {
+                every: ((interval / dt).round() as u64).max(1),
+                regions,
+            });
+        }
         if interaction_range > 0.0 {
             builder.note(format!(
                 "interaction range beyond touch: {interaction_range:.4e} m (a contact law acts at a distance)"
@@ -808,6 +824,115 @@ fn check_contact(
         .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))?;
     law.validate(&values)
         .map_err(|e| cx.err(&format!("{field}.{}", e.field), e.expected))
+}
+
+/// Checks the `sampling` section and turns it into the regions to sample, the domain
+/// first when asked for.
+fn check_sampling(cx: &Ctx, s: &SamplingSpec, two_d: bool) -> Result<Vec<RegionSpec>, SceneError> {
+    if let Some(interval) = s.interval
+        && !positive(interval)
+    {
+        return Err(cx.err("sampling.interval", "a positive interval in seconds"));
+    }
+    if !s.domain && s.regions.is_empty() {
+        return Err(cx.err("sampling", "at least one region, or `domain: true`"));
+    }
+    let mut regions = Vec::new();
+    if s.domain {
+        regions.push(RegionSpec {
+            name: DOMAIN_REGION.to_string(),
+            shape: RegionShape::Domain,
+            shear_rate: None,
+        });
+    }
+    let axes = if two_d { 2 } else { 3 };
+    for (k, r) in s.regions.iter().enumerate() {
+        let field = |sub: &str| format!("sampling.regions[{k}].{sub}");
+        let (name, shear_rate) = match r {
+            SamplingRegion::Box {
+                name, shear_rate, ..
+            }
+            | SamplingRegion::Slab {
+                name, shear_rate, ..
+            } => (name, *shear_rate),
+        };
+        let name_ok = !name.is_empty()
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        if !name_ok {
+            return Err(cx.err(
+                &field("name"),
+                format!("a non-empty name of letters, digits, `_` and `-`, found `{name}`"),
+            ));
+        }
+        if name == DOMAIN_REGION || s.regions[..k].iter().any(|o| region_name(o) == name) {
+            return Err(cx.err(
+                &field("name"),
+                format!(
+                    "a name not used by another region (`{DOMAIN_REGION}` is the whole domain), found `{name}`"
+                ),
+            ));
+        }
+        if let Some(rate) = shear_rate
+            && !(rate.is_finite() && rate >= 0.0)
+        {
+            return Err(cx.err(&field("shear_rate"), "a non-negative shear rate in 1/s"));
+        }
+        let shape = match r {
+            SamplingRegion::Box { min, max, .. } => {
+                let (lo, hi) = (vec3(*min), vec3(*max));
+                if !lo.is_finite() || !hi.is_finite() || (0..axes).any(|d| lo[d] >= hi[d]) {
+                    return Err(cx.err(
+                        &field("max"),
+                        if two_d {
+                            "x and y components of `max` above those of `min`"
+                        } else {
+                            "every component of `max` above that of `min`"
+                        },
+                    ));
+                }
+                RegionShape::Box { min: lo, max: hi }
+            }
+            SamplingRegion::Slab { axis, min, max, .. } => {
+                let axis = match (axis.as_str(), two_d) {
+                    ("x", _) => 0,
+                    ("y", _) => 1,
+                    ("z", false) => 2,
+                    _ => {
+                        return Err(cx.err(
+                            &field("axis"),
+                            if two_d {
+                                format!("\"x\" or \"y\" in a 2-D scene, found \"{axis}\"")
+                            } else {
+                                format!("\"x\", \"y\" or \"z\", found \"{axis}\"")
+                            },
+                        ));
+                    }
+                };
+                if !min.is_finite() || !max.is_finite() || min >= max {
+                    return Err(cx.err(&field("max"), "a finite `max` above `min`"));
+                }
+                RegionShape::Slab {
+                    axis,
+                    min: *min,
+                    max: *max,
+                }
+            }
+        };
+        regions.push(RegionSpec {
+            name: name.clone(),
+            shape,
+            shear_rate,
+        });
+    }
+    Ok(regions)
+}
+
+fn region_name(r: &SamplingRegion) -> &str {
+    match r {
+        SamplingRegion::Box { name, .. } | SamplingRegion::Slab { name, .. } => name,
+    }
 }
 
 fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), SceneError> {

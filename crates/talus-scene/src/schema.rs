@@ -75,6 +75,9 @@ pub struct SceneFile {
     /// What to write.
     #[serde(default)]
     pub output: OutputSpec,
+    /// Stress sampling over the domain and regions. Default: none (no stress system).
+    #[serde(default)]
+    pub sampling: Option<SamplingSpec>,
 }
 
 /// Integration scheme names.
@@ -330,4 +333,51 @@ impl Default for OutputSpec {
             report_interval: default_interval(),
         }
     }
+}
+
+/// Stress sampling: `sampling: (interval: 0.01, domain: true, regions: [...])`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SamplingSpec {
+    /// Simulated time between stress samples, s. Default: `output.report_interval`.
+    #[serde(default)]
+    pub interval: Option<f64>,
+    /// Sample the whole domain (reported as region `domain`). Default: true.
+    #[serde(default = "default_true")]
+    pub domain: bool,
+    /// Regions sampled besides the domain.
+    #[serde(default)]
+    pub regions: Vec<SamplingRegion>,
+}
+
+/// A region in which stresses are sampled.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub enum SamplingRegion {
+    /// An axis-aligned box.
+    Box {
+        /// Name in reports and recordings.
+        name: String,
+        /// Lower corner, m.
+        min: Vec3,
+        /// Upper corner, m.
+        max: Vec3,
+        /// Imposed shear rate for the inertial number, 1/s. Default: estimated.
+        #[serde(default)]
+        shear_rate: Option<f64>,
+    },
+    /// A layer between two planes normal to an axis, spanning the domain along the others.
+    Slab {
+        /// Name in reports and recordings.
+        name: String,
+        /// "x", "y" or "z".
+        axis: String,
+        /// Lower bound along the axis, m.
+        min: f64,
+        /// Upper bound along the axis, m.
+        max: f64,
+        /// Imposed shear rate for the inertial number, 1/s. Default: estimated.
+        #[serde(default)]
+        shear_rate: Option<f64>,
+    },
 }
