@@ -16,6 +16,7 @@ pub fn registry() -> talus_contact::LawRegistry {
     talus_linear_spring::register(&mut r);
     talus_hertz_mindlin::register(&mut r);
     talus_linear_cohesion::register(&mut r);
+    talus_jiang_liu::register(&mut r);
     // Rolling and twisting parts on top of each law assembled from sub-models.
     {
         use talus_hertz_mindlin::{HertzDamping, HertzNormal, MindlinTangential};
@@ -26,6 +27,16 @@ pub fn registry() -> talus_contact::LawRegistry {
             talus_linear_spring::SUMMARY,
         );
         talus_rolling_resistance::register_variants::<HertzNormal, HertzDamping, MindlinTangential>(
+            &mut r,
+            talus_hertz_mindlin::NAME,
+            talus_hertz_mindlin::SUMMARY,
+        );
+        talus_hdem::register_variants::<LinearNormal, LinearDashpot, CoulombSpring>(
+            &mut r,
+            talus_linear_spring::NAME,
+            talus_linear_spring::SUMMARY,
+        );
+        talus_hdem::register_variants::<HertzNormal, HertzDamping, MindlinTangential>(
             &mut r,
             talus_hertz_mindlin::NAME,
             talus_hertz_mindlin::SUMMARY,
