@@ -10,8 +10,11 @@ use talus_core::snapshot::GrainSnapshot;
 pub struct CellGrid {
     /// Lower corner of cell (0, 0, 0).
     pub origin: DVec3,
-    /// Cell edge, m.
-    pub cell: f64,
+    /// Cell edge along each axis, m (cubic cells, except along periodic axes, where the
+    /// box length is divided into a whole number of cells).
+    pub cell: DVec3,
+    /// Which axes wrap around (periodic box).
+    pub periodic: [bool; 3],
     /// Cells along x, y, z.
     pub dims: [usize; 3],
     /// Start of each cell's run in `sorted`, plus one final entry.
@@ -63,20 +66,41 @@ impl CellGrid {
             hi = DVec3::ZERO;
         }
         // Edge ≥ 2 R_max + r_c so that touching grains are never more than one cell apart.
-        let mut cell = (2.0 * s.max_radius + self.interaction_range).max(1e-12) * (1.0 + 1e-9);
+        let edge = (2.0 * s.max_radius + self.interaction_range).max(1e-12) * (1.0 + 1e-9);
+        self.periodic = s.periodic.map_or([false; 3], |b| b.axes);
+        if let Some(b) = &s.periodic {
+            for a in 0..3 {
+                if b.axes[a] {
+                    lo[a] = b.lo[a];
+                    hi[a] = b.hi[a];
+                }
+            }
+        }
         let extent = hi - lo;
         // Bound the cell count (a grain flung far away must not blow up memory).
         let max_cells = (8 * n).max(4096) as f64;
+        let mut scale = 1.0;
         loop {
-            let cells = (extent / cell).floor() + DVec3::ONE;
+            let mut cells = DVec3::ONE;
+            let mut size = DVec3::splat(edge * scale);
+            for a in 0..3 {
+                if self.periodic[a] {
+                    // A whole number of cells, each at least `edge` long.
+                    cells[a] = (extent[a] / (edge * scale)).floor().max(1.0);
+                    size[a] = extent[a] / cells[a];
+                } else {
+                    cells[a] = (extent[a] / (edge * scale)).floor() + 1.0;
+                }
+            }
             if cells.x * cells.y * cells.z <= max_cells {
                 self.dims = [cells.x as usize, cells.y as usize, cells.z as usize];
+                self.cell = size;
                 break;
             }
-            cell *= 1.5;
+            scale *= 1.5;
         }
         self.origin = lo;
-        self.cell = cell;
+        let cell = self.cell;
         let total = self.dims[0] * self.dims[1] * self.dims[2];
         self.cell_of.clear();
         self.cell_of.extend(s.position.iter().map(|p| {

@@ -82,16 +82,17 @@ pub fn find_touching_pairs(
                 let p = s.position[i];
                 let r = s.radius[i];
                 let c = grid.coords(p);
-                let z = c[2].saturating_sub(1)..=(c[2] + 1).min(grid.dims[2] - 1);
-                for cz in z {
-                    for cy in c[1].saturating_sub(1)..=(c[1] + 1).min(grid.dims[1] - 1) {
-                        for cx in c[0].saturating_sub(1)..=(c[0] + 1).min(grid.dims[0] - 1) {
+                let [xs, ys, zs] = [0, 1, 2].map(|a| neighbour_cells(grid, c, a));
+                for &cz in zs.cells() {
+                    for &cy in ys.cells() {
+                        for &cx in xs.cells() {
                             for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
                                 if (j as usize) <= i {
                                     continue;
                                 }
                                 let reach = r + s.radius[j as usize] + range;
-                                if p.distance_squared(s.position[j as usize]) < reach * reach {
+                                let d = s.separation(p, s.position[j as usize]);
+                                if d.length_squared() < reach * reach {
                                     out.push((i as u32, j));
                                 }
                             }
@@ -105,6 +106,48 @@ pub fn find_touching_pairs(
                 }
             }
         });
+}
+
+/// The distinct cells next to (and including) cell coordinate `c[axis]` along one axis:
+/// clamped at the grid's ends, wrapped around along a periodic axis (where a grid of one
+/// or two cells lists each cell once, so that no pair is found twice).
+struct Neighbours {
+    cells: [usize; 3],
+    len: usize,
+}
+
+impl Neighbours {
+    #[inline]
+    fn cells(&self) -> &[usize] {
+        &self.cells[..self.len]
+    }
+}
+
+#[inline]
+fn neighbour_cells(grid: &CellGrid, c: [usize; 3], axis: usize) -> Neighbours {
+    let n = grid.dims[axis];
+    let k = c[axis];
+    if grid.periodic[axis] {
+        match n {
+            1 => Neighbours { cells: [0, 0, 0], len: 1 },
+            2 => Neighbours { cells: [0, 1, 0], len: 2 },
+            _ => Neighbours {
+                cells: [(k + n - 1) % n, k, (k + 1) % n],
+                len: 3,
+            },
+        }
+    } else {
+        let lo = k.saturating_sub(1);
+        let hi = (k + 1).min(n - 1);
+        let mut cells = [0; 3];
+        for (slot, cell) in cells.iter_mut().zip(lo..=hi) {
+            *slot = cell;
+        }
+        Neighbours {
+            cells,
+            len: hi - lo + 1,
+        }
+    }
 }
 
 /// Creates contact entities for new pairs (with the law of their material pair) and

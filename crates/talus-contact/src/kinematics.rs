@@ -74,7 +74,7 @@ impl ContactKinematics {
     #[inline]
     pub fn grain_grain(s: &GrainSnapshot, i: usize, j: usize) -> Self {
         let (ra, rb) = (s.radius[i], s.radius[j]);
-        let d = s.position[i] - s.position[j];
+        let d = s.separation(s.position[i], s.position[j]);
         let dist = d.length();
         let normal = if dist > 0.0 { d / dist } else { DVec3::Z };
         let overlap = ra + rb - dist;

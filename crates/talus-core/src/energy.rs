@@ -5,7 +5,7 @@
 use bevy_ecs::prelude::*;
 
 /// Largest number of dissipation mechanisms one contact law may report.
-pub const MAX_DISSIPATION_CHANNELS: usize = 8;
+pub const MAX_DISSIPATION_CHANNELS: usize = 12;
 
 /// Names of the dissipation mechanisms registered by the laws of a scene.
 /// A law gets the channel ids for its mechanisms when it is built.

@@ -7,6 +7,7 @@
 pub mod components;
 pub mod energy;
 pub mod integrate;
+pub mod periodic;
 pub mod resources;
 pub mod schedule;
 pub mod snapshot;
@@ -17,6 +18,7 @@ pub use glam::DVec3;
 pub mod prelude {
     pub use crate::components::*;
     pub use crate::energy::*;
+    pub use crate::periodic::PeriodicBox;
     pub use crate::resources::*;
     pub use crate::schedule::*;
     pub use crate::snapshot::*;

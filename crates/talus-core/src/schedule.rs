@@ -196,6 +196,17 @@ impl SimBuilder {
         builder
     }
 
+    /// Makes the simulation periodic along the box's flagged axes: positions are wrapped
+    /// into the box after each drift, and pair separations take the nearest image.
+    pub fn periodic(&mut self, box_: crate::periodic::PeriodicBox) {
+        self.world.insert_resource(box_);
+        self.add_system(
+            Stage::IntegratePositions,
+            "wrap_positions",
+            crate::periodic::wrap_positions,
+        );
+    }
+
     /// Adds a system at the end of a stage, under a name shown in the plan.
     pub fn add_system<M>(
         &mut self,

@@ -51,6 +51,8 @@ pub struct GrainSnapshot {
     pub walls: Vec<WallState>,
     /// Largest grain radius.
     pub max_radius: f64,
+    /// The periodic box, when the scene has one: pair separations take its nearest image.
+    pub periodic: Option<crate::periodic::PeriodicBox>,
 }
 
 impl GrainSnapshot {
@@ -69,6 +71,15 @@ impl GrainSnapshot {
     pub fn dense(&self, entity: Entity) -> Option<usize> {
         let i = *self.dense_of.get(entity.index_u32() as usize)?;
         (i != NO_INDEX && self.entity[i as usize] == entity).then_some(i as usize)
+    }
+
+    /// Separation p_a − p_b of two positions, the nearest image in a periodic box.
+    #[inline]
+    pub fn separation(&self, a: DVec3, b: DVec3) -> DVec3 {
+        match &self.periodic {
+            Some(box_) => box_.min_image(a - b),
+            None => a - b,
+        }
     }
 
     /// Index of a wall entity in [`GrainSnapshot::walls`].
@@ -94,8 +105,10 @@ pub fn gather_snapshot(
         With<Grain>,
     >,
     walls: Query<(Entity, &Wall)>,
+    periodic: Option<Res<crate::periodic::PeriodicBox>>,
 ) {
     let s = &mut *snapshot;
+    s.periodic = periodic.map(|p| *p);
     s.entity.clear();
     s.position.clear();
     s.velocity.clear();

@@ -98,6 +98,7 @@ pub fn rerun_export(
     contacts: Query<(&Contact, &ContactGeometry, &ContactForce)>,
     walls: Query<(Entity, &Wall)>,
     stress: Option<Res<StressRecord>>,
+    periodic: Option<Res<PeriodicBox>>,
 ) {
     let Some(mut recorder) = recorder else {
         return;
@@ -128,6 +129,7 @@ pub fn rerun_export(
         &grains,
         &contacts,
         &walls,
+        periodic.as_deref(),
     )
     .and(log_stats(
         &recorder.stream,
@@ -161,6 +163,7 @@ fn log_frame(
     grains: &Query<(&Position, &Velocity, &Radius), With<Grain>>,
     contacts: &Query<(&Contact, &ContactGeometry, &ContactForce)>,
     walls: &Query<(Entity, &Wall)>,
+    periodic: Option<&PeriodicBox>,
 ) -> rerun::RecordingStreamResult<()> {
     // Timelines are thread-local to the stream; set them right before logging.
     rec.set_time_sequence(STEP_TIMELINE, clock.step as i64);
@@ -176,7 +179,7 @@ fn log_frame(
         s.view_logged = true;
     }
     let extent = log_grains(rec, s, grains)?;
-    log_force_chains(rec, s, &extent, grains, contacts)?;
+    log_force_chains(rec, s, &extent, grains, contacts, periodic)?;
     log_walls(rec, s, &extent, config.dimension == Dimension::Two, walls)
 }
 
@@ -237,6 +240,7 @@ fn log_force_chains(
     extent: &Extent,
     grains: &Query<(&Position, &Velocity, &Radius), With<Grain>>,
     contacts: &Query<(&Contact, &ContactGeometry, &ContactForce)>,
+    periodic: Option<&PeriodicBox>,
 ) -> rerun::RecordingStreamResult<()> {
     s.strips.clear();
     s.normal_forces.clear();
@@ -249,7 +253,11 @@ fn log_force_chains(
         let centre = |e: Entity| grains.get(e).map_or(g.point, |(p, _, _)| p.0);
         let start = centre(c.a);
         let end = match c.kind {
-            ContactKind::GrainGrain => centre(c.b),
+            // Across a periodic seam, draw the strip to the image of b nearest to a.
+            ContactKind::GrainGrain => match periodic {
+                Some(b) => start - b.min_image(start - centre(c.b)),
+                None => centre(c.b),
+            },
             ContactKind::GrainWall => g.point,
         };
         s.strips.push([to_f32(start), to_f32(end)]);

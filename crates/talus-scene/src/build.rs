@@ -442,7 +442,14 @@ impl Scene {
         if grains.is_empty() {
             return Err(cx.err("grains", "at least one grain"));
         }
+        let periodic = match &f.periodic {
+            Some(spec) => Some(check_periodic(&cx, spec, &grains, two_d)?),
+            None => None,
+        };
         check_initial_overlaps(&cx, &grains, &walls, f.initial_overlap_tolerance)?;
+        if let Some(b) = &periodic {
+            check_overlaps_across_seams(&cx, &grains, b, f.initial_overlap_tolerance)?;
+        }
 
         // Lightest grain of each material, for reduced masses and the time step.
         let n_mat = materials.len();
@@ -677,6 +684,24 @@ impl Scene {
         builder.add_plugin(&CollisionPlugin {
             interaction_range,
         });
+        if let Some(b) = periodic {
+            // The interaction range is known only now: a pair must not reach two images.
+            let reach = 2.0 * grains.iter().map(|g| g.radius).fold(0.0, f64::max) + interaction_range;
+            for a in 0..3 {
+                if b.axes[a] && b.length()[a] <= 2.0 * reach {
+                    return Err(cx.err(
+                        &format!("periodic.{}", ["x", "y", "z"][a]),
+                        format!(
+                            "a periodic length above twice the largest reach 2 R_max + r_c = {reach:.4e} m, got {:.4e} m",
+                            b.length()[a]
+                        ),
+                    ));
+                }
+            }
+            builder.periodic(b);
+            let names: Vec<&str> = (0..3).filter(|&a| b.axes[a]).map(|a| ["x", "y", "z"][a]).collect();
+            builder.note(format!("periodic along {}", names.join(", ")));
+        }
         // Stress sampling only when the scene asks for it: otherwise no system is added.
         if let (Some(spec), Some(regions)) = (&f.sampling, sampling_regions) {
             let interval = spec.interval.unwrap_or(f.output.report_interval);
@@ -945,6 +970,90 @@ fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), Sc
             &format!("{field}.max"),
             "every component of `max` above that of `min`",
         ));
+    }
+    Ok(())
+}
+
+/// The periodic box of a scene: each axis given must have min < max, must not be z in a
+/// 2-D scene, and must hold every grain centre in [min, max).
+fn check_periodic(
+    cx: &Ctx,
+    spec: &PeriodicSpec,
+    grains: &[GrainInit],
+    two_d: bool,
+) -> Result<PeriodicBox, SceneError> {
+    let mut b = PeriodicBox {
+        lo: DVec3::ZERO,
+        hi: DVec3::ONE,
+        axes: [false; 3],
+    };
+    for (a, (name, extent)) in [("x", spec.x), ("y", spec.y), ("z", spec.z)].into_iter().enumerate() {
+        let Some((lo, hi)) = extent else { continue };
+        let field = format!("periodic.{name}");
+        if two_d && a == 2 {
+            return Err(cx.err(&field, "no periodic z axis in a 2-D scene (disks lie in the xy-plane)"));
+        }
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(cx.err(&field, "an extent (min, max) with min < max, in metres"));
+        }
+        b.lo[a] = lo;
+        b.hi[a] = hi;
+        b.axes[a] = true;
+    }
+    if !b.axes.iter().any(|&p| p) {
+        return Err(cx.err("periodic", "at least one periodic axis: x, y or z"));
+    }
+    for g in grains {
+        for a in 0..3 {
+            if b.axes[a] && !(g.position[a] >= b.lo[a] && g.position[a] < b.hi[a]) {
+                return Err(cx.err(
+                    &format!("grains[{}]", g.source),
+                    format!(
+                        "grain centres inside the periodic extent [{}, {}) along {}, found {}",
+                        b.lo[a],
+                        b.hi[a],
+                        ["x", "y", "z"][a],
+                        g.position[a]
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(b)
+}
+
+/// Overlaps between grains on opposite sides of a periodic face, which the plain check
+/// cannot see: only grains within 2 R_max of a periodic face can be involved, and those
+/// are compared pairwise through the nearest image.
+fn check_overlaps_across_seams(
+    cx: &Ctx,
+    grains: &[GrainInit],
+    b: &PeriodicBox,
+    tolerance: f64,
+) -> Result<(), SceneError> {
+    let rmax = grains.iter().map(|g| g.radius).fold(0.0, f64::max);
+    let near_face = |p: DVec3| {
+        (0..3).any(|a| b.axes[a] && (p[a] - b.lo[a] < 2.0 * rmax || b.hi[a] - p[a] < 2.0 * rmax))
+    };
+    let band: Vec<&GrainInit> = grains.iter().filter(|g| near_face(g.position)).collect();
+    for (i, g) in band.iter().enumerate() {
+        for h in &band[i + 1..] {
+            let plain = g.position - h.position;
+            let image = b.min_image(plain);
+            if image == plain {
+                continue; // the plain check has seen this pair
+            }
+            let overlap = g.radius + h.radius - image.length();
+            if overlap > tolerance * g.radius.min(h.radius) {
+                return Err(cx.err(
+                    &format!("grains[{}]", h.source),
+                    format!(
+                        "grains that do not overlap across the periodic boundary: grains at ({:.4}, {:.4}, {:.4}) (grains[{}]) and ({:.4}, {:.4}, {:.4}) overlap by {:.3e} m through the seam",
+                        g.position.x, g.position.y, g.position.z, g.source, h.position.x, h.position.y, h.position.z, overlap
+                    ),
+                ));
+            }
+        }
     }
     Ok(())
 }

@@ -78,6 +78,9 @@ pub struct SceneFile {
     /// Stress sampling over the domain and regions. Default: none (no stress system).
     #[serde(default)]
     pub sampling: Option<SamplingSpec>,
+    /// Periodic boundaries: the axes that wrap around and their extent. Default: none.
+    #[serde(default)]
+    pub periodic: Option<PeriodicSpec>,
 }
 
 /// Integration scheme names.
@@ -333,6 +336,22 @@ impl Default for OutputSpec {
             report_interval: default_interval(),
         }
     }
+}
+
+/// Periodic boundaries: `periodic: (x: (0.0, 0.1), y: (0.0, 0.1))`. Each axis given is
+/// periodic over `[min, max)`; grains leaving through one face come back through the other.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PeriodicSpec {
+    /// Extent (min, max) of the x axis, m, if x is periodic.
+    #[serde(default)]
+    pub x: Option<(f64, f64)>,
+    /// Extent of the y axis, if periodic.
+    #[serde(default)]
+    pub y: Option<(f64, f64)>,
+    /// Extent of the z axis, if periodic (3-D scenes only).
+    #[serde(default)]
+    pub z: Option<(f64, f64)>,
 }
 
 /// Stress sampling: `sampling: (interval: 0.01, domain: true, regions: [...])`.

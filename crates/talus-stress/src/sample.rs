@@ -254,12 +254,21 @@ pub fn sample_stress(
         grain_min = DVec3::ZERO;
         grain_max = DVec3::ZERO;
     }
-    let domain = domain_bounds(&DomainInputs {
+    let mut domain = domain_bounds(&DomainInputs {
         walls: &snapshot.walls,
         grain_min,
         grain_max,
         dims,
     });
+    // Along a periodic axis the domain is the periodic box itself.
+    if let Some(b) = &snapshot.periodic {
+        for a in 0..3 {
+            if b.axes[a] {
+                domain.min[a] = b.lo[a];
+                domain.max[a] = b.hi[a];
+            }
+        }
+    }
 
     let sums = &mut scratch.sums;
     sums.clear();
@@ -329,7 +338,12 @@ pub fn sample_stress(
                     continue;
                 };
                 let branch_b = g.normal * (snapshot.radius[j] - 0.5 * g.overlap);
-                (snapshot.position[j], f.torque_b - branch_b.cross(-f.force))
+                // The image of b nearest to a: across a periodic seam the branch is
+                // the short way round.
+                (
+                    xa - snapshot.separation(xa, snapshot.position[j]),
+                    f.torque_b - branch_b.cross(-f.force),
+                )
             }
             // A wall has no centre: the branch ends at the contact point.
             ContactKind::GrainWall => (point, DVec3::ZERO),

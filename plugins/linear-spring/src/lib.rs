@@ -290,11 +290,10 @@ pub(crate) const PARAMS: &[ParamSpec] = &[
     },
 ];
 
-/// Registers `linear_spring` (written whole) and `linear_spring_parts` (the same law
-/// assembled from [`parts`]).
+/// Registers `linear_spring` (written whole). Its `rolling:`/`twisting:` variants are
+/// assembled from [`parts`] by the rolling-resistance plugin.
 pub fn register(registry: &mut LawRegistry) {
     registry.register(Box::new(LinearSpringLaw));
-    registry.register(Box::new(parts::composed_descriptor()));
 }
 
 /// What scenes see of the linear law.

@@ -232,8 +232,9 @@ impl SubModel for CoulombSpring {
 /// The linear law assembled from its parts.
 pub type ComposedLinearSpring = Composed<LinearNormal, LinearDashpot, CoulombSpring>;
 
-/// Descriptor of the composed linear law, registered as `linear_spring_parts` so that it
-/// can be compared with the whole law (and carry rolling and twisting parts).
+/// Descriptor of the composed linear law, named `linear_spring_parts`: what the
+/// composition test compares with the whole law. Scenes reach these parts through the
+/// `rolling:`/`twisting:` variants of `linear_spring`.
 pub fn composed_descriptor() -> ComposedLaw<LinearNormal, LinearDashpot, CoulombSpring> {
     ComposedLaw::new(
         "linear_spring_parts",
