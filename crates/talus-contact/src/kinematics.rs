@@ -97,7 +97,8 @@ impl ContactKinematics {
             tangential_velocity: relative_velocity - normal * normal_velocity,
             displacement: DVec3::ZERO,
             relative_omega: wa - wb,
-            effective_mass: ma * mb / (ma + mb),
+            // Written as a harmonic sum so that a frozen (infinite-mass) partner gives m_a.
+            effective_mass: 1.0 / (1.0 / ma + 1.0 / mb),
             effective_radius: ra * rb / (ra + rb),
             min_radius: ra.min(rb),
         }

@@ -29,6 +29,11 @@ pub struct Radius(pub f64);
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct Mass(pub f64);
 
+/// Marks a grain that never moves (a rough base, a fixed obstacle): it takes part in
+/// contacts, but no integrator touches it, and contact laws see it with infinite mass.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct Frozen;
+
 /// Moment of inertia of a grain about any axis through its centre, kg m².
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct MomentOfInertia(pub f64);

@@ -26,7 +26,7 @@ pub fn kick_drift_translation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
     mut ledger: ResMut<EnergyLedger>,
-    mut grains: Query<(&mut Position, &mut Velocity, &Force, &Mass), With<Grain>>,
+    mut grains: Query<(&mut Position, &mut Velocity, &Force, &Mass), (With<Grain>, Without<Frozen>)>,
 ) {
     let dt = clock.pass_dt;
     if dt == 0.0 {
@@ -76,7 +76,7 @@ pub fn kick_drift_translation(
 pub fn first_kick_rotation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
-    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), With<Grain>>,
+    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), (With<Grain>, Without<Frozen>)>,
 ) {
     let kick = config.integrator.kick_before_drift() * clock.pass_dt;
     rotation_kick(kick, grains);
@@ -86,7 +86,7 @@ pub fn first_kick_rotation(
 pub fn second_kick_rotation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
-    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), With<Grain>>,
+    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), (With<Grain>, Without<Frozen>)>,
 ) {
     let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
     rotation_kick(kick, grains);
@@ -94,7 +94,7 @@ pub fn second_kick_rotation(
 
 fn rotation_kick(
     kick: f64,
-    mut grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), With<Grain>>,
+    mut grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), (With<Grain>, Without<Frozen>)>,
 ) {
     if kick == 0.0 {
         return;
@@ -118,7 +118,7 @@ fn rotation_kick(
 pub fn second_kick_translation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
-    mut grains: Query<(&mut Velocity, &Force, &Mass), With<Grain>>,
+    mut grains: Query<(&mut Velocity, &Force, &Mass), (With<Grain>, Without<Frozen>)>,
 ) {
     let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
     if kick == 0.0 {
@@ -177,7 +177,7 @@ pub fn kinetic_energy(
             &Force,
             &Torque,
         ),
-        With<Grain>,
+        (With<Grain>, Without<Frozen>),
     >,
 ) {
     // The configured step, also in the priming pass (whose own step is 0): the

@@ -106,6 +106,7 @@ pub fn gather_snapshot(
     >,
     walls: Query<(Entity, &Wall)>,
     periodic: Option<Res<crate::periodic::PeriodicBox>>,
+    frozen: Query<Entity, (With<Grain>, With<Frozen>)>,
 ) {
     let s = &mut *snapshot;
     s.periodic = periodic.map(|p| *p);
@@ -133,6 +134,13 @@ pub fn gather_snapshot(
     }
     for (i, e) in s.entity.iter().enumerate() {
         s.dense_of[e.index_u32() as usize] = i as u32;
+    }
+    // A frozen grain resists like an infinite mass: a contact's reduced mass is then the
+    // moving grain's own (as LAMMPS does for frozen atoms).
+    for e in &frozen {
+        if let Some(i) = s.dense(e) {
+            s.mass[i] = f64::INFINITY;
+        }
     }
     s.walls.clear();
     for (entity, wall) in &walls {

@@ -3,6 +3,7 @@
 //! whether rotation is needed, grain generation and the initial-overlap check.
 
 use std::any::Any;
+use std::path::Path;
 
 use glam::DVec3;
 use talus_collision::CollisionPlugin;
@@ -405,6 +406,10 @@ impl Scene {
                     }
                     material
                 }
+                GrainSource::LammpsData { file, types } => {
+                    grains.extend(self.read_lammps(&cx, k, file, types, two_d, &material_id)?);
+                    continue;
+                }
                 GrainSource::Random {
                     material,
                     region,
@@ -456,8 +461,8 @@ impl Scene {
         let mut lightest = vec![f64::INFINITY; n_mat];
         let mut smallest = vec![f64::INFINITY; n_mat];
         for g in &grains {
-            let (m, _) =
-                mass_and_inertia(dimension, g.radius, materials[g.material as usize].density);
+            let density = g.density.unwrap_or(materials[g.material as usize].density);
+            let (m, _) = mass_and_inertia(dimension, g.radius, density);
             lightest[g.material as usize] = lightest[g.material as usize].min(m);
             smallest[g.material as usize] = smallest[g.material as usize].min(g.radius);
         }
@@ -769,17 +774,31 @@ impl Scene {
             .iter()
             .map(|m| m.density)
             .collect();
-        builder.world.spawn_batch(grains.into_iter().map(|g| {
+        let bundle = |g: &GrainInit| {
             GrainBundle::new(
                 dimension,
                 g.position,
                 g.radius,
-                densities[g.material as usize],
+                g.density.unwrap_or(densities[g.material as usize]),
                 MaterialId(g.material),
             )
             .with_velocity(g.velocity)
             .with_angular_velocity(g.angular_velocity)
-        }));
+        };
+        let frozen_count = grains.iter().filter(|g| g.frozen).count();
+        builder
+            .world
+            .spawn_batch(grains.iter().filter(|g| !g.frozen).map(bundle).collect::<Vec<_>>());
+        if frozen_count > 0 {
+            builder.world.spawn_batch(
+                grains
+                    .iter()
+                    .filter(|g| g.frozen)
+                    .map(|g| (bundle(g), Frozen))
+                    .collect::<Vec<_>>(),
+            );
+            builder.note(format!("frozen grains: {frozen_count} (in contacts, never moved)"));
+        }
         Ok(BuiltScene {
             builder,
             name: f.name.clone(),
@@ -972,6 +991,76 @@ fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), Sc
         ));
     }
     Ok(())
+}
+
+impl Scene {
+    /// The grains of a `LammpsData` source: the file is read relative to the scene file,
+    /// each atom type mapped to its material (and frozen or not).
+    fn read_lammps(
+        &self,
+        cx: &Ctx,
+        k: usize,
+        file: &str,
+        types: &[LammpsType],
+        two_d: bool,
+        material_id: &dyn Fn(&str, &str) -> Result<u16, SceneError>,
+    ) -> Result<Vec<GrainInit>, SceneError> {
+        let field = |s: &str| format!("grains[{k}].{s}");
+        if types.is_empty() {
+            return Err(cx.err(&field("types"), "at least one (type: n, material: \"name\") entry"));
+        }
+        let mut map: Vec<(u32, u16, bool)> = Vec::new();
+        for (j, t) in types.iter().enumerate() {
+            if map.iter().any(|m| m.0 == t.atom_type) {
+                return Err(cx.err(
+                    &format!("grains[{k}].types[{j}].type"),
+                    format!("an atom type not already mapped (type {} appears twice)", t.atom_type),
+                ));
+            }
+            let mat = material_id(&t.material, &format!("grains[{k}].types[{j}].material"))?;
+            map.push((t.atom_type, mat, t.frozen));
+        }
+        let path = self
+            .path
+            .parent()
+            .map_or_else(|| Path::new(file).to_path_buf(), |dir| dir.join(file));
+        let atoms = crate::lammps::read_data(&path).map_err(|e| {
+            cx.err(
+                &field("file"),
+                if e.line > 0 {
+                    format!("a valid LAMMPS data file: {}:{}: {}", path.display(), e.line, e.message)
+                } else {
+                    format!("a valid LAMMPS data file: {}: {}", path.display(), e.message)
+                },
+            )
+        })?;
+        let mut out = Vec::with_capacity(atoms.len());
+        for a in atoms {
+            let Some(&(_, material, frozen)) = map.iter().find(|m| m.0 == a.atom_type) else {
+                return Err(cx.err(
+                    &field("types"),
+                    format!("a material for atom type {} (atom {} in {})", a.atom_type, a.id, path.display()),
+                ));
+            };
+            if two_d && a.position.z != 0.0 {
+                return Err(cx.err(
+                    &field("file"),
+                    format!("atoms in the plane z = 0 for a 2-D scene (atom {} has z = {})", a.id, a.position.z),
+                ));
+            }
+            out.push(GrainInit {
+                position: a.position,
+                radius: 0.5 * a.diameter,
+                velocity: if frozen { DVec3::ZERO } else { a.velocity },
+                angular_velocity: if frozen { DVec3::ZERO } else { a.angular_velocity },
+                material,
+                source: k,
+                density: Some(a.density),
+                frozen,
+            });
+        }
+        Ok(out)
+    }
 }
 
 /// The periodic box of a scene: each axis given must have min < max, must not be z in a

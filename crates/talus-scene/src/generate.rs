@@ -21,6 +21,10 @@ pub struct GrainInit {
     pub material: u16,
     /// Index of the grain source in the scene.
     pub source: usize,
+    /// The grain's own density, kg/m³, instead of its material's (data files).
+    pub density: Option<f64>,
+    /// A frozen grain never moves.
+    pub frozen: bool,
 }
 
 /// Why a source could not produce its grains: (field relative to the source, expected).
@@ -52,6 +56,8 @@ pub fn generate(
                 },
                 material,
                 source: index,
+                density: None,
+                frozen: false,
             })
             .collect()),
         GrainSource::Lattice {
@@ -91,12 +97,18 @@ pub fn generate(
                             angular_velocity: DVec3::ZERO,
                             material,
                             source: index,
+                            density: None,
+                            frozen: false,
                         });
                     }
                 }
             }
             Ok(out)
         }
+        GrainSource::LammpsData { .. } => Err((
+            "file".into(),
+            "grains read by the scene builder (a data file is not generated)".into(),
+        )),
         GrainSource::Random {
             region,
             count,
@@ -115,6 +127,8 @@ pub fn generate(
                         angular_velocity: DVec3::ZERO,
                         material,
                         source: index,
+                        density: None,
+                        frozen: false,
                     })
                     .collect()
             })

@@ -10,6 +10,7 @@
 pub mod build;
 pub mod error;
 pub mod generate;
+pub mod lammps;
 pub mod locate;
 pub mod schema;
 

@@ -304,6 +304,28 @@ pub enum GrainSource {
         #[serde(default)]
         velocity_spread: f64,
     },
+    /// Grains read from a LAMMPS data file (`atom_style sphere`): positions, diameters,
+    /// densities and, if the file has them, velocities and angular velocities.
+    LammpsData {
+        /// The data file, relative to the scene file.
+        file: String,
+        /// Which material (and whether frozen) each atom type becomes.
+        types: Vec<LammpsType>,
+    },
+}
+
+/// The material of one LAMMPS atom type: `(type: 2, material: "base", frozen: true)`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LammpsType {
+    /// The atom type number.
+    #[serde(rename = "type")]
+    pub atom_type: u32,
+    /// Material name (its density is replaced by each atom's own).
+    pub material: String,
+    /// Frozen grains never move but take part in contacts. Default: false.
+    #[serde(default)]
+    pub frozen: bool,
 }
 
 fn default_interval() -> f64 {

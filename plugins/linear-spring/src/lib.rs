@@ -31,6 +31,20 @@ pub enum NormalDamping {
     /// A damping ratio ζ: c_n = 2ζ√(m* k_n) for each contact's own reduced mass, so
     /// that every pair has the restitution the ratio was made from.
     Ratio(f64),
+    /// A damping rate γ_n per unit reduced mass: c_n = m* γ_n (LAMMPS `gran/hooke`).
+    Rate(f64),
+}
+
+impl NormalDamping {
+    /// The dashpot coefficient c_n of a contact of stiffness `k` and reduced mass `m`.
+    #[inline]
+    pub fn coefficient(self, k: f64, m: f64) -> f64 {
+        match self {
+            Self::Coefficient(c) => c,
+            Self::Ratio(zeta) => 2.0 * zeta * (m * k).sqrt(),
+            Self::Rate(gamma) => gamma * m,
+        }
+    }
 }
 
 /// Resolved parameters of one material pair.
@@ -157,10 +171,7 @@ impl ContactLaw for LinearSpring {
         }
         let n = kin.normal;
         let k = p.normal_stiffness;
-        let c = match p.normal_damping {
-            NormalDamping::Coefficient(c) => c,
-            NormalDamping::Ratio(zeta) => 2.0 * zeta * (kin.effective_mass * k).sqrt(),
-        };
+        let c = p.normal_damping.coefficient(k, kin.effective_mass);
         let vn = kin.normal_velocity;
         let fn_mag = k * delta - c * vn;
         out.force = n * fn_mag;
@@ -230,7 +241,8 @@ pub fn rotate_into_plane(spring: DVec3, n: DVec3) -> DVec3 {
 }
 
 /// Declared parameters, in the order the parts of [`parts`] slice them: normal
-/// (stiffness, collision_time), damping (damping, restitution), tangential (the rest).
+/// (stiffness, collision_time), damping (damping, restitution, damping_rate), tangential
+/// (the rest).
 pub(crate) const PARAMS: &[ParamSpec] = &[
     ParamSpec {
         name: "stiffness",
@@ -263,6 +275,14 @@ pub(crate) const PARAMS: &[ParamSpec] = &[
         range: ParamRange::UNIT_OPEN_CLOSED,
         default: None,
         mix: MixRule::Geometric,
+    },
+    ParamSpec {
+        name: "damping_rate",
+        unit: "1/s",
+        doc: "normal damping per unit reduced mass γ_n: c_n = m* γ_n for each contact (LAMMPS gran/hooke)",
+        range: ParamRange::NON_NEGATIVE,
+        default: None,
+        mix: MixRule::Arithmetic,
     },
     ParamSpec {
         name: "friction",
@@ -326,16 +346,28 @@ impl LinearSpringLaw {
             }
             (None, None) => return Err(err("stiffness", "`stiffness` or `collision_time`")),
         };
-        let damping = match (values.get("damping"), restitution) {
-            (Some(c), None) => NormalDamping::Coefficient(c),
-            (None, Some(e)) => NormalDamping::Ratio(damping_ratio_from_restitution(e)),
-            (Some(_), Some(_)) => {
+        let damping = match (values.get("damping"), restitution, values.get("damping_rate")) {
+            (Some(c), None, None) => NormalDamping::Coefficient(c),
+            (None, Some(e), None) => NormalDamping::Ratio(damping_ratio_from_restitution(e)),
+            (None, None, Some(gamma)) => NormalDamping::Rate(gamma),
+            (None, None, None) => {
+                return Err(err(
+                    "restitution",
+                    "`restitution`, `damping` or `damping_rate`",
+                ));
+            }
+            (_, _, Some(_)) => {
+                return Err(err(
+                    "damping_rate",
+                    "one of `damping`, `restitution` and `damping_rate`, not several",
+                ));
+            }
+            (Some(_), Some(_), None) => {
                 return Err(err(
                     "damping",
                     "either `damping` or `restitution`, not both",
                 ));
             }
-            (None, None) => return Err(err("restitution", "`restitution` or `damping`")),
         };
         Ok(LinearParams {
             normal_stiffness: k,
@@ -355,6 +387,7 @@ impl LinearSpringLaw {
         let zeta = match p.normal_damping {
             NormalDamping::Coefficient(c) => c / (2.0 * (k * m).sqrt()),
             NormalDamping::Ratio(z) => z,
+            NormalDamping::Rate(gamma) => gamma * m / (2.0 * (k * m).sqrt()),
         };
         let contact_time = if zeta < 1.0 {
             PI / (omega0 * (1.0 - zeta * zeta).sqrt())

@@ -83,7 +83,7 @@ pub struct DashpotHistory {
 impl SubModel for LinearDashpot {
     const KIND: SubModelKind = SubModelKind::Damping;
     const NAME: &'static str = "linear_dashpot";
-    const PARAMS: &'static [ParamSpec] = PARAMS.split_at(4).0.split_at(2).1;
+    const PARAMS: &'static [ParamSpec] = PARAMS.split_at(5).0.split_at(2).1;
     const DISSIPATION: &'static [&'static str] = &["normal_damping"];
     type Params = NormalDamping;
     type History = DashpotHistory;
@@ -111,10 +111,7 @@ impl SubModel for LinearDashpot {
             return;
         }
         let k = s.normal_stiffness;
-        let c = match *p {
-            NormalDamping::Coefficient(c) => c,
-            NormalDamping::Ratio(zeta) => 2.0 * zeta * (kin.effective_mass * k).sqrt(),
-        };
+        let c = p.coefficient(k, kin.effective_mass);
         let vn = kin.normal_velocity;
         s.normal_damping = -c * vn;
         s.damping_coefficient = c;
@@ -156,7 +153,7 @@ pub struct CoulombHistory {
 impl SubModel for CoulombSpring {
     const KIND: SubModelKind = SubModelKind::Tangential;
     const NAME: &'static str = "coulomb_spring";
-    const PARAMS: &'static [ParamSpec] = PARAMS.split_at(4).1;
+    const PARAMS: &'static [ParamSpec] = PARAMS.split_at(5).1;
     const DISSIPATION: &'static [&'static str] = &["tangential_damping", "friction_slip"];
     type Params = CoulombParams;
     type History = CoulombHistory;

@@ -1,0 +1,41 @@
+//! LAMMPS's chute benchmark (`scenes/bench/chute.ron`, LAMMPS's own data file): the same
+//! physics as LAMMPS gives the same kinetic energies. LAMMPS's output for this input:
+//! Σ½mv² = 784139.13 and Σ½Iω² = 1601.1263 at step 0; 784292.08 and 1571.0968 at step 100.
+
+mod common;
+
+use std::path::Path;
+
+use talus::cli::ReportSample;
+
+#[test]
+fn chute_reproduces_lammps_kinetic_energies_over_100_steps() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench/chute.ron");
+    let scene = talus::scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let built = scene.build(&talus::registry()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(built.grain_count, 32_000);
+    let steps = built.stop.steps;
+    assert_eq!(steps, 100);
+    let mut sim = built.builder.build();
+    sim.prime().unwrap();
+    let start = ReportSample::take(&sim.world);
+    // Step 0 is the data file itself: both sums must match LAMMPS to its 8 printed digits.
+    assert!((start.translational_kinetic - 784139.13).abs() < 0.01, "{}", start.translational_kinetic);
+    assert!((start.rotational_kinetic - 1601.1263).abs() < 1e-4, "{}", start.rotational_kinetic);
+    sim.run_steps(steps).unwrap();
+    let end = ReportSample::take(&sim.world);
+    let gain = end.translational_kinetic - start.translational_kinetic;
+    let lammps_gain = 784292.08 - 784139.13;
+    eprintln!(
+        "chute, 100 steps: translational gain {gain:.4} (LAMMPS {lammps_gain:.2}, {:+.3e} relative), rotational {:.6} (LAMMPS 1571.0968, {:+.3e} relative)",
+        (gain - lammps_gain) / lammps_gain,
+        end.rotational_kinetic,
+        (end.rotational_kinetic - 1571.0968) / 1571.0968
+    );
+    assert!((gain - lammps_gain).abs() < 0.02 * lammps_gain, "gain {gain}");
+    assert!(
+        (end.rotational_kinetic - 1571.0968).abs() < 1e-3 * 1571.0968,
+        "rotational {}",
+        end.rotational_kinetic
+    );
+}
