@@ -54,6 +54,12 @@ impl CellGrid {
 
     /// Rebuilds the grid over the grains of a snapshot.
     pub fn rebuild(&mut self, s: &GrainSnapshot) {
+        self.rebuild_with_margin(s, 0.0);
+    }
+
+    /// Rebuilds the grid with cells at least 2 R_max + r_c + `margin` long (the margin is
+    /// a neighbour list's skin).
+    pub fn rebuild_with_margin(&mut self, s: &GrainSnapshot, margin: f64) {
         let n = s.len();
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -66,7 +72,8 @@ impl CellGrid {
             hi = DVec3::ZERO;
         }
         // Edge ≥ 2 R_max + r_c so that touching grains are never more than one cell apart.
-        let edge = (2.0 * s.max_radius + self.interaction_range).max(1e-12) * (1.0 + 1e-9);
+        let edge =
+            (2.0 * s.max_radius + self.interaction_range + margin).max(1e-12) * (1.0 + 1e-9);
         self.periodic = s.periodic.map_or([false; 3], |b| b.axes);
         if let Some(b) = &s.periodic {
             for a in 0..3 {
@@ -133,7 +140,48 @@ impl CellGrid {
     }
 }
 
-/// Broad-phase system: bins the snapshot's grains.
-pub fn build_cell_grid(snapshot: Res<GrainSnapshot>, mut grid: ResMut<CellGrid>) {
-    grid.rebuild(&snapshot);
+/// The distinct cells next to (and including) one cell coordinate along one axis:
+/// clamped at the grid's ends, wrapped around along a periodic axis (where a grid of one
+/// or two cells lists each cell once, so that no pair is found twice).
+pub struct Neighbours {
+    cells: [usize; 3],
+    len: usize,
+}
+
+impl Neighbours {
+    /// The cells.
+    #[inline]
+    pub fn cells(&self) -> &[usize] {
+        &self.cells[..self.len]
+    }
+}
+
+impl CellGrid {
+    /// The cells next to cell coordinate `c[axis]` along `axis`, itself included.
+    #[inline]
+    pub fn neighbour_cells(&self, c: [usize; 3], axis: usize) -> Neighbours {
+        let n = self.dims[axis];
+        let k = c[axis];
+        if self.periodic[axis] {
+            match n {
+                1 => Neighbours { cells: [0, 0, 0], len: 1 },
+                2 => Neighbours { cells: [0, 1, 0], len: 2 },
+                _ => Neighbours {
+                    cells: [(k + n - 1) % n, k, (k + 1) % n],
+                    len: 3,
+                },
+            }
+        } else {
+            let lo = k.saturating_sub(1);
+            let hi = (k + 1).min(n - 1);
+            let mut cells = [0; 3];
+            for (slot, cell) in cells.iter_mut().zip(lo..=hi) {
+                *slot = cell;
+            }
+            Neighbours {
+                cells,
+                len: hi - lo + 1,
+            }
+        }
+    }
 }

@@ -3,16 +3,19 @@
 //! contact entities.
 //!
 //! Contract: the broad phase may propose pairs that do not touch, never miss one that
-//! does. Cost is O(N): a counting sort into cells of edge ≥ 2 R_max + r_c, then a
+//! does. Cost is O(N): Verlet neighbour lists with a skin, built (when a grain has moved
+//! half the skin) by a counting sort into cells of edge ≥ 2 R_max + r_c + skin and a
 //! 27-cell stencil per grain. No hashing anywhere.
 
 pub mod grid;
 pub mod narrow;
+pub mod neighbours;
 
 use talus_core::schedule::{Plugin, SimBuilder, Stage};
 
 pub use grid::CellGrid;
 pub use narrow::ContactIndex;
+pub use neighbours::NeighbourList;
 
 /// Installs the broad phase and the narrow phase.
 #[derive(Clone, Copy, Debug, Default)]
@@ -31,7 +34,12 @@ impl Plugin for CollisionPlugin {
         grid.interaction_range = self.interaction_range;
         sim.world.insert_resource(grid);
         sim.world.insert_resource(ContactIndex::default());
-        sim.add_system(Stage::BroadPhase, "cell_grid", grid::build_cell_grid);
+        sim.world.insert_resource(NeighbourList::default());
+        sim.add_system(
+            Stage::BroadPhase,
+            "neighbour_list",
+            neighbours::update_neighbour_list,
+        );
         sim.add_system(
             Stage::NarrowPhase,
             "find_touching_pairs",

@@ -9,10 +9,8 @@ use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind, systems
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
+use crate::neighbours::{CHUNK, NeighbourList};
 
-/// Grains per parallel work unit of the pair search; fixed, so that the order of the
-/// found pairs does not depend on the number of threads.
-const CHUNK: usize = 256;
 
 /// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]
@@ -59,14 +57,15 @@ fn canonical(a: Entity, b: Entity) -> (Entity, Entity) {
     if a <= b { (a, b) } else { (b, a) }
 }
 
-/// Finds all touching grain–grain and grain–wall pairs, in parallel over fixed chunks.
+/// Finds all touching grain–grain and grain–wall pairs among the neighbour list's
+/// candidates, in parallel over fixed chunks.
 pub fn find_touching_pairs(
     snapshot: Res<GrainSnapshot>,
     grid: Res<CellGrid>,
+    list: Res<NeighbourList>,
     mut index: ResMut<ContactIndex>,
 ) {
     let s = &*snapshot;
-    let grid = &*grid;
     let n = s.len();
     let chunks = n.div_ceil(CHUNK);
     let range = grid.interaction_range;
@@ -75,28 +74,20 @@ pub fn find_touching_pairs(
     }
     index.found[..chunks]
         .par_iter_mut()
+        .zip(list.chunks[..chunks].par_iter())
         .enumerate()
-        .for_each(|(chunk, out)| {
+        .for_each(|(chunk, (out, candidates))| {
             out.clear();
+            let mut cursor = 0;
             for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
                 let p = s.position[i];
                 let r = s.radius[i];
-                let c = grid.coords(p);
-                let [xs, ys, zs] = [0, 1, 2].map(|a| neighbour_cells(grid, c, a));
-                for &cz in zs.cells() {
-                    for &cy in ys.cells() {
-                        for &cx in xs.cells() {
-                            for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
-                                if (j as usize) <= i {
-                                    continue;
-                                }
-                                let reach = r + s.radius[j as usize] + range;
-                                let d = s.separation(p, s.position[j as usize]);
-                                if d.length_squared() < reach * reach {
-                                    out.push((i as u32, j));
-                                }
-                            }
-                        }
+                while cursor < candidates.len() && candidates[cursor].0 as usize == i {
+                    let j = candidates[cursor].1;
+                    cursor += 1;
+                    let reach = r + s.radius[j as usize] + range;
+                    if s.separation(p, s.position[j as usize]).length_squared() < reach * reach {
+                        out.push((i as u32, j));
                     }
                 }
                 for (w, wall) in s.walls.iter().enumerate() {
@@ -106,48 +97,6 @@ pub fn find_touching_pairs(
                 }
             }
         });
-}
-
-/// The distinct cells next to (and including) cell coordinate `c[axis]` along one axis:
-/// clamped at the grid's ends, wrapped around along a periodic axis (where a grid of one
-/// or two cells lists each cell once, so that no pair is found twice).
-struct Neighbours {
-    cells: [usize; 3],
-    len: usize,
-}
-
-impl Neighbours {
-    #[inline]
-    fn cells(&self) -> &[usize] {
-        &self.cells[..self.len]
-    }
-}
-
-#[inline]
-fn neighbour_cells(grid: &CellGrid, c: [usize; 3], axis: usize) -> Neighbours {
-    let n = grid.dims[axis];
-    let k = c[axis];
-    if grid.periodic[axis] {
-        match n {
-            1 => Neighbours { cells: [0, 0, 0], len: 1 },
-            2 => Neighbours { cells: [0, 1, 0], len: 2 },
-            _ => Neighbours {
-                cells: [(k + n - 1) % n, k, (k + 1) % n],
-                len: 3,
-            },
-        }
-    } else {
-        let lo = k.saturating_sub(1);
-        let hi = (k + 1).min(n - 1);
-        let mut cells = [0; 3];
-        for (slot, cell) in cells.iter_mut().zip(lo..=hi) {
-            *slot = cell;
-        }
-        Neighbours {
-            cells,
-            len: hi - lo + 1,
-        }
-    }
 }
 
 /// Creates contact entities for new pairs (with the law of their material pair) and

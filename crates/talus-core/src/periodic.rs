@@ -25,13 +25,20 @@ impl PeriodicBox {
         self.hi - self.lo
     }
 
-    /// The nearest image of a separation vector.
+    /// The nearest image of a separation vector between two wrapped positions (each
+    /// component within one box length, as between any two grains of the box).
     #[inline]
     pub fn min_image(&self, mut d: DVec3) -> DVec3 {
         let l = self.length();
         for a in 0..3 {
+            // Compare and shift instead of d − L·round(d/L): `round` is a libm call on
+            // baseline x86-64 and this runs for every candidate pair.
             if self.axes[a] {
-                d[a] -= l[a] * (d[a] / l[a]).round();
+                if d[a] > 0.5 * l[a] {
+                    d[a] -= l[a];
+                } else if d[a] < -0.5 * l[a] {
+                    d[a] += l[a];
+                }
             }
         }
         d
@@ -77,7 +84,8 @@ mod tests {
             hi: DVec3::new(1.0, 1.0, 5.0),
             axes: [true, true, false],
         };
-        assert_eq!(b.min_image(DVec3::new(0.9, 1.5, 4.0)), DVec3::new(-0.1, -0.5, 4.0));
+        let d = b.min_image(DVec3::new(0.9, 1.5, 4.0));
+        assert!((d - DVec3::new(-0.1, -0.5, 4.0)).length() < 1e-15, "{d:?}");
         let w = b.wrap(DVec3::new(-0.25, 1.5, 7.0));
         assert!((w - DVec3::new(0.75, -0.5, 7.0)).length() < 1e-15);
         let w = b.wrap(DVec3::new(1.0, 1.0, 0.0));
