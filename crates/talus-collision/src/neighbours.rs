@@ -34,6 +34,12 @@ pub struct NeighbourList {
 }
 
 impl NeighbourList {
+    /// Forces a rebuild at the next broad phase (the result must not change: the list is
+    /// only a superset of the touching pairs).
+    pub fn invalidate(&mut self) {
+        self.entities.clear();
+    }
+
     /// Whether the list must be rebuilt: first use, a changed set of grains, or a grain
     /// that moved more than half the skin.
     fn stale(&self, s: &GrainSnapshot) -> bool {
