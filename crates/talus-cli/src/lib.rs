@@ -1,9 +1,10 @@
-//! The `talus` command line: `talus run` and `talus check`, the run loop with
+//! The `talus` command line: `talus run`, `talus check` and `talus accuracy`, the run loop with
 //! progress, the JSON run report, and the last good state kept for blow-ups.
 //!
 //! The binary in the workspace root supplies the registry of contact laws; this crate
 //! never names a law.
 
+pub mod accuracy;
 pub mod report;
 pub mod run;
 
@@ -47,6 +48,15 @@ pub enum Command {
         /// The scene file (RON).
         scene: PathBuf,
     },
+    /// Run an accuracy study: one scene under several settings, error against wall
+    /// clock, written to DIR/study.md, study.csv and study.svg.
+    Accuracy {
+        /// The study file (RON): `Study(scene: ..., quantity: ..., settings: [...])`.
+        study: PathBuf,
+        /// Output folder. Default: out/<study file name>/.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 /// Runs the command line with the given contact laws.
@@ -63,6 +73,41 @@ pub fn main_with(registry: LawRegistry) -> ExitCode {
                 ExitCode::from(2)
             }
         },
+        Command::Accuracy { study, out } => {
+            let out = out.unwrap_or_else(|| {
+                PathBuf::from("out").join(study.file_stem().unwrap_or_default())
+            });
+            match accuracy::run_study(&study, &registry, &out) {
+                Ok(result) => {
+                    for r in &result.rows {
+                        println!(
+                            "{:<50} dt {:.3e} s  value {:.8e}  error {:.3e}  {:.3} s",
+                            r.setting.label(),
+                            r.dt,
+                            r.value,
+                            r.error,
+                            r.seconds
+                        );
+                    }
+                    match result.fastest_within_tolerance {
+                        Some(k) => println!(
+                            "fastest within {:.1e}: {}",
+                            result.tolerance,
+                            result.rows[k].setting.label()
+                        ),
+                        None => println!("no setting reaches {:.1e}", result.tolerance),
+                    }
+                    for f in &result.files {
+                        println!("wrote {}", f.display());
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::from(2)
+                }
+            }
+        }
         Command::Run {
             scene,
             out,
