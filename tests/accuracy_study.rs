@@ -7,6 +7,7 @@ mod common;
 use std::path::Path;
 
 use talus::cli::accuracy::{load_study, run_study};
+use talus::scene::schema::IntegratorName;
 
 #[test]
 fn hertz_contact_time_study_converges_at_second_order() {
@@ -15,12 +16,23 @@ fn hertz_contact_time_study_converges_at_second_order() {
     let out = common::temp_dir("accuracy");
     let result = run_study(&study, &talus::registry(), &out).unwrap_or_else(|e| panic!("{e}"));
     // Settings 20, 40, 80, 160, 320 steps per collision each halve the step.
-    let refined: Vec<f64> = result
-        .rows
-        .iter()
-        .filter(|r| r.setting.steps_per_collision.is_some_and(|n| n >= 20.0))
-        .map(|r| r.error)
-        .collect();
+    let errors = |gear: bool| -> Vec<f64> {
+        result
+            .rows
+            .iter()
+            .filter(|r| r.setting.steps_per_collision.is_some_and(|n| n >= 20.0))
+            .filter(|r| (r.setting.integrator == Some(IntegratorName::Gear)) == gear)
+            .map(|r| r.error)
+            .collect()
+    };
+    let refined = errors(false);
+    let gear = errors(true);
+    eprintln!("Gear contact-time errors: {gear:?}");
+    // The higher-order scheme is more accurate at every step of the sweep.
+    assert_eq!(gear.len(), refined.len());
+    for (g, v) in gear.iter().zip(&refined) {
+        assert!(g < v, "Gear {gear:?} vs velocity Verlet {refined:?}");
+    }
     eprintln!("contact-time errors: {refined:?}");
     assert_eq!(refined.len(), 5);
     for pair in refined.windows(2) {
@@ -43,4 +55,36 @@ fn a_bad_study_file_names_its_line() {
     std::fs::write(&path, "Study(\n    scene: \"x.ron\",\n    quantity: Restitution(grain: (0, 1)),\n    settings: [()],\n)").unwrap();
     let e = load_study(&path).unwrap_err().to_string();
     assert!(e.contains("bad.study.ron:3:"), "{e}");
+}
+
+/// Free fall: velocity Verlet and Gear integrate a constant force exactly (they are exact
+/// for quadratic trajectories); symplectic Euler, which kicks a whole step before the
+/// first drift, lands ½ g dt t off: x_N = x₀ + v₀t + ½gt² + ½g dt t.
+#[test]
+fn every_integrator_integrates_free_fall_exactly() {
+    for integrator in ["VelocityVerlet", "SymplecticEuler", "Gear"] {
+        let text = format!(
+            r#"Scene(
+    name: "fall",
+    gravity: (0.0, 0.0, -9.81),
+    steps: 1000,
+    time_step: 1e-4,
+    integrator: {integrator},
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0, contact: (law: "linear_spring", stiffness: 1e4, restitution: 0.5))],
+    grains: [List(material: "glass", grains: [(position: (0.0, 0.0, 1.0), radius: 0.01, velocity: (0.3, 0.0, 2.0))])],
+    output: (recording: false),
+)"#
+        );
+        let (mut sim, steps) = common::build(&text);
+        sim.run_steps(steps).unwrap();
+        let g = common::grains(&mut sim)[0];
+        let t = 0.1;
+        let euler_offset = if integrator == "SymplecticEuler" { -0.5 * 9.81 * 1e-4 * t } else { 0.0 };
+        let z = 1.0 + 2.0 * t - 0.5 * 9.81 * t * t + euler_offset;
+        assert!((g.position.z - z).abs() < 1e-12, "{integrator}: z {} vs {z}", g.position.z);
+        assert!((g.position.x - 0.03).abs() < 1e-12, "{integrator}: x {}", g.position.x);
+        let vz = 2.0 - 9.81 * t;
+        assert!((g.velocity.z - vz).abs() < 1e-11, "{integrator}: vz {} vs {vz}", g.velocity.z);
+    }
 }

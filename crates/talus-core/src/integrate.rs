@@ -187,8 +187,10 @@ pub fn kinetic_energy(
     // Stored velocity v = v₋ + (1 − a) dt F/m, so v₋ = v − (1 − a) dt F/m and
     // v₊ = v + a dt F/m: ½ m v₋·v₊ − ½ m v² = ½ dt (2a − 1) v·F − ½ a (1 − a) dt² |F|²/m.
     let a = config.integrator.kick_before_drift();
-    let linear = 0.5 * dt * (2.0 * a - 1.0);
-    let quadratic = 0.5 * a * (1.0 - a) * dt * dt;
+    // Gear is not a leapfrog: no staggering term (its energy error shows in the balance).
+    let leapfrog = config.integrator != crate::resources::Integrator::Gear;
+    let linear = if leapfrog { 0.5 * dt * (2.0 * a - 1.0) } else { 0.0 };
+    let quadratic = if leapfrog { 0.5 * a * (1.0 - a) * dt * dt } else { 0.0 };
     // Without rotation the torques are computed but never integrated.
     let rotation = config.rotation;
     let mut translational = 0.0;

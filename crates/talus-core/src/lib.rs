@@ -6,6 +6,7 @@
 
 pub mod components;
 pub mod energy;
+pub mod gear;
 pub mod integrate;
 pub mod periodic;
 pub mod resources;

@@ -32,6 +32,9 @@ pub enum Integrator {
     VelocityVerlet,
     /// Symplectic (semi-implicit) Euler: kick then drift, first order.
     SymplecticEuler,
+    /// Gear predictor–corrector, six values for positions and four for spins: high order
+    /// for smooth forces, not symplectic (`crate::gear`).
+    Gear,
 }
 
 impl Integrator {
@@ -41,6 +44,8 @@ impl Integrator {
         match self {
             Integrator::VelocityVerlet => 0.5,
             Integrator::SymplecticEuler => 1.0,
+            // Gear's own systems replace the kicks.
+            Integrator::Gear => 0.0,
         }
     }
 }

@@ -123,6 +123,7 @@ impl SimBuilder {
         world.insert_resource(EnergySnapshot::default());
         world.insert_resource(GrainSnapshot::default());
         let rotation = config.rotation;
+        let integrator = config.integrator;
         let gravity_on = config.gravity != glam::DVec3::ZERO;
         world.insert_resource(config);
 
@@ -154,17 +155,23 @@ impl SimBuilder {
         for stage in Stage::ALL {
             builder.add_hidden(stage, mark_stage(stage));
         }
-        builder.add_system(
-            Stage::IntegratePositions,
-            "kick_drift_translation",
-            integrate::kick_drift_translation,
-        );
-        if rotation {
+        let gear = integrator == crate::resources::Integrator::Gear;
+        if gear {
+            builder.world.insert_resource(crate::gear::GearHistory::default());
+            builder.add_system(Stage::IntegratePositions, "gear_predict", crate::gear::gear_predict);
+        } else {
             builder.add_system(
                 Stage::IntegratePositions,
-                "kick_rotation",
-                integrate::first_kick_rotation,
+                "kick_drift_translation",
+                integrate::kick_drift_translation,
             );
+            if rotation {
+                builder.add_system(
+                    Stage::IntegratePositions,
+                    "kick_rotation",
+                    integrate::first_kick_rotation,
+                );
+            }
         }
         builder.add_system(
             Stage::IntegratePositions,
@@ -179,17 +186,21 @@ impl SimBuilder {
         if gravity_on {
             builder.add_system(Stage::BodyForces, "gravity", integrate::gravity);
         }
-        builder.add_system(
-            Stage::IntegrateVelocities,
-            "kick_translation",
-            integrate::second_kick_translation,
-        );
-        if rotation {
+        if gear {
+            builder.add_system(Stage::IntegrateVelocities, "gear_correct", crate::gear::gear_correct);
+        } else {
             builder.add_system(
                 Stage::IntegrateVelocities,
-                "kick_rotation",
-                integrate::second_kick_rotation,
+                "kick_translation",
+                integrate::second_kick_translation,
             );
+            if rotation {
+                builder.add_system(
+                    Stage::IntegrateVelocities,
+                    "kick_rotation",
+                    integrate::second_kick_rotation,
+                );
+            }
         }
         builder.add_system(Stage::Sample, "kinetic_energy", integrate::kinetic_energy);
         builder.add_system(Stage::Sample, "health_check", integrate::health_check);

@@ -673,6 +673,7 @@ impl Scene {
         let integrator = match f.integrator {
             IntegratorName::VelocityVerlet => Integrator::VelocityVerlet,
             IntegratorName::SymplecticEuler => Integrator::SymplecticEuler,
+            IntegratorName::Gear => Integrator::Gear,
         };
         let mut builder = SimBuilder::new(SimConfig {
             dimension,

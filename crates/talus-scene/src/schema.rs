@@ -91,6 +91,8 @@ pub enum IntegratorName {
     VelocityVerlet,
     /// Symplectic Euler.
     SymplecticEuler,
+    /// Gear predictor–corrector (six values for positions, four for spins).
+    Gear,
 }
 
 /// A material.
