@@ -378,3 +378,90 @@ fn too_large_a_time_step_stops_with_a_diagnosis_and_the_last_good_state() {
         Ok(_) => panic!("a step 20× the stability bound ran through"),
     }
 }
+
+/// A packing squeezed by a piston to a confining pressure where overlaps reach a few per
+/// cent of the radius: nothing turns NaN, overlaps stay bounded, the work of the piston is
+/// accounted for (the bookkeeping balance closes), and the energy never exceeds what the
+/// piston put in.
+#[test]
+fn a_dense_packing_under_high_confining_pressure_stays_stable() {
+    let text = r#"Scene(
+    name: "squeeze",
+    gravity: (0.0, 0.0, -9.81),
+    duration: 0.05,
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 1e4, restitution: 0.3, friction: 0.5))],
+    walls: [
+        Box(min: (0.0, 0.0, 0.0), max: (0.012, 0.012, 0.1), material: "glass", omit: ["z_max"]),
+        Plane(name: "piston", point: (0.0, 0.0, 0.0101), normal: (0.0, 0.0, -1.0), material: "glass",
+            velocity: (0.0, 0.0, -0.01)),
+    ],
+    grains: [Lattice(material: "glass", radius: 0.001, region: (min: (0.0, 0.0, 0.0), max: (0.012, 0.012, 0.012)),
+        spacing: 0.002)],
+    output: (recording: false),
+)"#;
+    let (mut sim, steps) = common::build(text);
+    let course = run_course(&mut sim, steps, 200);
+    let wall_work = course.last.wall_work;
+    let book = (course.last.bookkeeping_balance - course.first.bookkeeping_balance).abs() / wall_work;
+    eprintln!(
+        "squeeze: piston work {wall_work:.3e} J, max overlap/R {:.3e}, bookkeeping {book:.2e}, dissipated {:.3e} J",
+        course.max_overlap_ratio, course.last.dissipated_total
+    );
+    assert!(wall_work > 0.0, "the piston pushed");
+    // The piston advanced 0.4 mm into a packing 10 mm tall: a few per cent of strain.
+    assert!(course.max_overlap_ratio > 0.01, "the packing was squeezed: {}", course.max_overlap_ratio);
+    assert!(course.max_overlap_ratio < 0.2, "overlap {}", course.max_overlap_ratio);
+    assert!(book < 1e-6, "bookkeeping drift {book:e}");
+    // Energy in the grains never exceeds the work of gravity and the piston.
+    let stored = course.last.kinetic() + course.last.elastic;
+    assert!(stored <= course.last.gravity_work + wall_work + course.first.kinetic() + course.first.elastic);
+}
+
+/// The same sweep with Hertz–Mindlin (steel spheres of 1 mm, e = 0.8, μ = 0.3): its
+/// dashpot is calibrated so that the restitution is the prescribed one at every speed.
+#[test]
+fn hertz_mindlin_impacts_from_1e_minus_4_to_1e2_metres_per_second() {
+    let mut restitutions = vec![];
+    for speed in [1e-4f64, 1e-2, 1.0, 1e2] {
+        // Hertz contact time of this pair at this speed: 2.9433 δ_max / v.
+        let m = 7800.0 * 4.0 / 3.0 * std::f64::consts::PI * 1e-9;
+        let e_star = 2e11 / (2.0 * (1.0 - 0.09));
+        let delta = (15.0 * 0.5 * m * speed * speed / (16.0 * e_star * 0.0005f64.sqrt())).powf(0.4);
+        let contact_time = 2.9433 * delta / speed;
+        let x = 0.001 + 0.5 * speed * 5.0 * contact_time;
+        let text = format!(
+            r#"Scene(
+    name: "hertz-impact",
+    gravity: (0.0, 0.0, 0.0),
+    duration: {duration:e},
+    plugins: ["hertz_mindlin"],
+    materials: [(name: "steel", density: 7800.0,
+        contact: (law: "hertz_mindlin", youngs_modulus: 2e11, poisson_ratio: 0.3, restitution: 0.8,
+            friction: 0.3, characteristic_velocity: {speed:e}))],
+    grains: [List(material: "steel", grains: [
+        (position: ({mx:e}, 0.0, 0.0), radius: 0.001, velocity: ({v:e}, 0.0, 0.0)),
+        (position: ({x:e}, 0.0, 0.0), radius: 0.001, velocity: ({mv:e}, 0.0, 0.0)),
+    ])],
+    output: (recording: false),
+)"#,
+            duration = 10.0 * contact_time,
+            mx = -x,
+            v = 0.5 * speed,
+            mv = -0.5 * speed,
+        );
+        let (mut sim, steps) = common::build(&text);
+        let course = run_course(&mut sim, steps, 1);
+        let g = common::grains(&mut sim);
+        let e = -(g[0].velocity.x - g[1].velocity.x) / speed;
+        eprintln!("Hertz–Mindlin, v = {speed:e} m/s: restitution {e:.6}, max overlap/R {:.3e}", course.max_overlap_ratio);
+        restitutions.push(e);
+        assert_eq!(course.last.contacts, 0, "v = {speed}: the spheres separated");
+        assert!(course.last.kinetic() <= course.first.kinetic());
+        assert!(course.max_overlap_ratio < 0.1, "v = {speed}: {}", course.max_overlap_ratio);
+    }
+    for e in &restitutions {
+        assert!((e - 0.8).abs() < 0.01 * 0.8, "restitutions {restitutions:?}");
+    }
+}
