@@ -148,6 +148,18 @@ pub struct Wall {
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct WallLoad(pub DVec3);
 
+/// A wall moved by a servo: along its normal, at a speed proportional to the difference
+/// between a target load and the load the grains put on it, so that it holds a pressure.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct Servo {
+    /// Target compressive load on the wall, N (pressure × area).
+    pub target_load: f64,
+    /// Speed per newton of load error, m/(s N).
+    pub gain: f64,
+    /// Largest speed, m/s.
+    pub max_speed: f64,
+}
+
 /// All components of one wall.
 #[derive(Bundle, Clone, Debug)]
 pub struct WallBundle {

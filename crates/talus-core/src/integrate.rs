@@ -147,6 +147,18 @@ pub fn gravity(config: Res<SimConfig>, mut grains: Query<(&mut Force, &Mass), Wi
     }
 }
 
+/// Servo-controlled walls: velocity along the normal = gain × (target load − load), the
+/// load being the grains' push on the wall at the end of the last step (compressive
+/// positive), clamped to the servo's largest speed. Scheduled only when a wall has one.
+pub fn servo_walls(mut walls: Query<(&mut Wall, &WallLoad, &Servo)>) {
+    for (mut wall, load, servo) in &mut walls {
+        let n = wall.normal;
+        let pushed = -load.0.dot(n);
+        let speed = (servo.gain * (servo.target_load - pushed)).clamp(-servo.max_speed, servo.max_speed);
+        wall.velocity = n * speed;
+    }
+}
+
 /// Prescribed wall motion: point += dt · velocity.
 pub fn move_walls(clock: Res<Clock>, mut walls: Query<&mut Wall>) {
     let dt = clock.pass_dt;

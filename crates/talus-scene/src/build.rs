@@ -248,6 +248,7 @@ impl Scene {
 
         // Walls.
         let mut walls = Vec::new();
+        let mut servos: Vec<(usize, Servo)> = Vec::new();
         for (k, w) in f.walls.iter().enumerate() {
             let field = |s: &str| format!("walls[{k}].{s}");
             match w {
@@ -257,7 +258,31 @@ impl Scene {
                     normal,
                     material,
                     velocity,
+                    servo,
                 } => {
+                    if let Some(sv) = servo {
+                        let positive = |x: f64| x.is_finite() && x > 0.0;
+                        if !(sv.pressure.is_finite() && sv.pressure >= 0.0) {
+                            return Err(cx.err(&field("servo.pressure"), "a non-negative pressure in Pa"));
+                        }
+                        if !positive(sv.area) {
+                            return Err(cx.err(&field("servo.area"), "a positive area in m²"));
+                        }
+                        if !positive(sv.gain) {
+                            return Err(cx.err(&field("servo.gain"), "a positive gain in m/(s N)"));
+                        }
+                        if sv.max_speed.is_some_and(|v| !positive(v)) {
+                            return Err(cx.err(&field("servo.max_speed"), "a positive speed in m/s"));
+                        }
+                        if *velocity != [0.0; 3] {
+                            return Err(cx.err(&field("velocity"), "no velocity on a servo wall (the servo sets it)"));
+                        }
+                        servos.push((walls.len(), Servo {
+                            target_load: sv.pressure * sv.area,
+                            gain: sv.gain,
+                            max_speed: sv.max_speed.unwrap_or(f64::INFINITY),
+                        }));
+                    }
                     let mat = material_id(material, &field("material"))?;
                     let n = vec3(*normal);
                     if !n.is_finite() || n.length() == 0.0 {
@@ -764,8 +789,14 @@ impl Scene {
             grains.len(),
             walls.len()
         ));
-        for (_, w) in walls {
-            builder.world.spawn(w);
+        if !servos.is_empty() {
+            builder.add_system(Stage::Prepare, "servo_walls", talus_core::integrate::servo_walls);
+        }
+        for (k, (_, w)) in walls.into_iter().enumerate() {
+            let mut entity = builder.world.spawn(w);
+            if let Some((_, servo)) = servos.iter().find(|(i, _)| *i == k) {
+                entity.insert(*servo);
+            }
         }
         let grain_count = grains.len();
         let densities: Vec<f64> = builder

@@ -208,6 +208,9 @@ pub enum WallSpec {
         /// Prescribed velocity, m/s. Default: (0, 0, 0).
         #[serde(default)]
         velocity: Vec3,
+        /// Hold a pressure instead of a velocity. Default: none.
+        #[serde(default)]
+        servo: Option<ServoSpec>,
     },
     /// The inner faces of an axis-aligned box: 6 planes (4 in 2-D).
     Box {
@@ -360,6 +363,21 @@ impl Default for OutputSpec {
             report_interval: default_interval(),
         }
     }
+}
+
+/// A servo on a plane wall: `servo: (pressure: 1e4, area: 0.0004, gain: 1e-3)`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServoSpec {
+    /// Target pressure on the wall, Pa (compressive positive).
+    pub pressure: f64,
+    /// Area the pressure acts on, m² (2-D: length × 1 m).
+    pub area: f64,
+    /// Wall speed per newton of load error, m/(s N).
+    pub gain: f64,
+    /// Largest wall speed, m/s. Default: unbounded.
+    #[serde(default)]
+    pub max_speed: Option<f64>,
 }
 
 /// Periodic boundaries: `periodic: (x: (0.0, 0.1), y: (0.0, 0.1))`. Each axis given is
