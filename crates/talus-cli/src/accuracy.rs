@@ -55,7 +55,8 @@ pub enum Quantity {
         grains: (usize, usize),
     },
     /// A field of the run report's last sample (`translational_kinetic`, `elastic`,
-    /// `dissipated_total`, `contacts`, ...).
+    /// `dissipated_total`, `contacts`, ...), or a JSON pointer into it for nested fields
+    /// (`/stress/regions/0/solid_fraction` when the scene samples stress).
     Final {
         /// The field name.
         field: String,
@@ -312,9 +313,11 @@ fn run_setting(
             sim.run_steps(steps).map_err(fail)?;
             let sample = crate::ReportSample::take(&sim.world);
             let json = serde_json::to_value(&sample).expect("a sample serialises");
-            json.get(field).and_then(|v| v.as_f64()).ok_or_else(|| {
+            // A JSON pointer (`/stress/regions/0/solid_fraction`) reaches nested fields.
+            let value = if field.starts_with('/') { json.pointer(field) } else { json.get(field) };
+            value.and_then(|v| v.as_f64()).ok_or_else(|| {
                 StudyError::Study(format!(
-                    "field `quantity.field`: expected a numeric field of a report sample (translational_kinetic, elastic, dissipated_total, ...), found `{field}`"
+                    "field `quantity.field`: expected a numeric field of a report sample (translational_kinetic, elastic, dissipated_total, ...) or a JSON pointer to one (/stress/regions/0/solid_fraction), found `{field}`"
                 ))
             })?
         }
