@@ -88,3 +88,29 @@ fn every_integrator_integrates_free_fall_exactly() {
         assert!((g.velocity.z - vz).abs() < 1e-11, "{integrator}: vz {} vs {vz}", g.velocity.z);
     }
 }
+
+/// The step as a fraction of the critical step: the contact-time error of the elastic Hertz
+/// collision falls at second order as the fraction halves.
+#[test]
+fn critical_step_fractions_converge_too() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let scene = root.join("scenes/studies/hertz-elastic.ron");
+    let dir = common::temp_dir("accuracy-critical");
+    let study = dir.join("critical.study.ron");
+    std::fs::write(
+        &study,
+        format!(
+            "Study(scene: {:?}, quantity: ContactTime(grains: (0, 1)), reference: Analytic(3.2495773750e-05),\n settings: [(critical_step_fraction: 0.02), (critical_step_fraction: 0.01), (critical_step_fraction: 0.005)])",
+            scene.display().to_string()
+        ),
+    )
+    .unwrap();
+    let result = run_study(&study, &talus::registry(), &dir.join("out")).unwrap_or_else(|e| panic!("{e}"));
+    let errors: Vec<f64> = result.rows.iter().map(|r| r.error).collect();
+    let steps: Vec<f64> = result.rows.iter().map(|r| r.dt).collect();
+    eprintln!("critical fractions: dt {steps:?}, errors {errors:?}");
+    assert!((steps[0] / steps[1] - 2.0).abs() < 1e-12 && (steps[1] / steps[2] - 2.0).abs() < 1e-12);
+    for pair in errors.windows(2) {
+        assert!(pair[0] / pair[1] > 3.0, "{errors:?}");
+    }
+}

@@ -54,7 +54,8 @@ pub enum Quantity {
         /// The two grains.
         grains: (usize, usize),
     },
-    /// A field of the run report's last sample (`translational_kinetic`, `elastic`,
+    /// A field of the report sample at the end of the run (or once the scene's
+    /// `settle_kinetic_energy` is reached, as `talus run` stops) (`translational_kinetic`, `elastic`,
     /// `dissipated_total`, `contacts`, ...), or a JSON pointer into it for nested fields
     /// (`/stress/regions/0/solid_fraction` when the scene samples stress).
     Final {
@@ -80,6 +81,10 @@ pub struct Setting {
     /// Steps per shortest collision (the automatic time step).
     #[serde(default)]
     pub steps_per_collision: Option<f64>,
+    /// The time step as a fraction of the critical (stability) step of the scene's
+    /// stiffest pair; above 1 the run is forced and may blow up (a reported failure).
+    #[serde(default)]
+    pub critical_step_fraction: Option<f64>,
     /// Integration scheme.
     #[serde(default)]
     pub integrator: Option<IntegratorName>,
@@ -94,6 +99,9 @@ impl Setting {
         let mut parts = Vec::new();
         if let Some(n) = self.steps_per_collision {
             parts.push(format!("{n} steps/collision"));
+        }
+        if let Some(f) = self.critical_step_fraction {
+            parts.push(format!("dt = {f} × critical"));
         }
         if let Some(i) = self.integrator {
             parts.push(format!("{i:?}"));
@@ -260,8 +268,28 @@ fn run_setting(
             }
         }
     }
-    let built = scene.build(registry)?;
+    let mut built = scene.build(registry)?;
+    if let Some(fraction) = setting.critical_step_fraction {
+        if !(fraction > 0.0 && fraction.is_finite() && built.stability_limit.is_finite()) {
+            return Err(StudyError::Study(format!(
+                "field `critical_step_fraction`: expected a positive fraction of a finite critical step, found {fraction} (critical step {:e} s)",
+                built.stability_limit
+            )));
+        }
+        // Same duration, the step set from the critical one.
+        let duration = built.stop.steps as f64 * built.builder.world.resource::<SimConfig>().dt;
+        scene.file.time_step = Some(fraction * built.stability_limit);
+        scene.file.force_time_step = true;
+        if scene.file.steps.is_some() {
+            scene.file.steps = None;
+            scene.file.duration = Some(duration);
+        }
+        built = scene.build(registry)?;
+    }
     let steps = built.stop.steps;
+    let settle = built.stop.settle_kinetic_energy;
+    let grain_count = built.grain_count;
+    let report_interval = built.output.report_interval;
     let mut sim = built.builder.build();
     let dt = sim.config().dt;
     let started = Instant::now();
@@ -310,7 +338,18 @@ fn run_setting(
             }
         }
         Quantity::Final { field } => {
-            sim.run_steps(steps).map_err(fail)?;
+            // Like `talus run`: stop early once settled, checked every report interval.
+            let every = ((report_interval / dt).round() as u64).max(1);
+            for k in 1..=steps {
+                sim.step().map_err(fail)?;
+                if k % every == 0
+                    && settle.is_some_and(|e| {
+                        crate::ReportSample::take(&sim.world).kinetic() / grain_count as f64 <= e
+                    })
+                {
+                    break;
+                }
+            }
             let sample = crate::ReportSample::take(&sim.world);
             let json = serde_json::to_value(&sample).expect("a sample serialises");
             // A JSON pointer (`/stress/regions/0/solid_fraction`) reaches nested fields.

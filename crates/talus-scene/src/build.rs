@@ -53,6 +53,9 @@ pub struct BuiltScene {
     pub grain_count: usize,
     /// Time step and why it was chosen.
     pub time_step_reason: String,
+    /// The smallest stability limit of the step over the scene's material pairs, s
+    /// (infinite when no pair reports one).
+    pub stability_limit: f64,
 }
 
 struct Ctx<'a> {
@@ -841,6 +844,7 @@ impl Scene {
             output: f.output.clone(),
             grain_count,
             time_step_reason,
+            stability_limit: stability.as_ref().map_or(f64::INFINITY, |s| s.0),
         })
     }
 }
