@@ -352,3 +352,29 @@ fn scene_errors_name_the_field() {
         .to_string();
     assert!(err.contains("stiffness"), "{err}");
 }
+
+/// The run report carries the scene's heat rate R (the `heat` channel's power): never
+/// negative through a collision, positive while the grains touch, and integrating to the
+/// heat booked.
+#[test]
+fn report_heat_rate_is_never_negative_and_integrates_to_the_heat() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/jiang-liu-head-on.ron");
+    let built = talus::scene::load(&path).unwrap().build(&talus::registry()).unwrap();
+    let steps = built.stop.steps;
+    let mut sim = built.builder.build();
+    sim.prime().unwrap();
+    let dt = sim.config().dt;
+    let (mut integral, mut positive) = (0.0, 0);
+    for _ in 0..steps {
+        sim.step().unwrap();
+        let s = talus::cli::ReportSample::take(&sim.world);
+        let rate = s.dissipation_power["heat"];
+        assert!(rate >= 0.0, "heat rate {rate} < 0 at step {}", s.step);
+        positive += usize::from(rate > 0.0);
+        integral += rate * dt;
+    }
+    let last = talus::cli::ReportSample::take(&sim.world);
+    let heat = last.dissipated["heat"];
+    assert!(positive > 10 && heat > 0.0);
+    assert!((integral - heat).abs() <= 1e-9 * heat, "∫R dt = {integral:e}, heat {heat:e}");
+}

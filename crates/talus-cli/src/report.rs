@@ -29,6 +29,9 @@ pub struct ReportSample {
     pub dissipated: BTreeMap<String, f64>,
     /// Sum of `dissipated`, J.
     pub dissipated_total: f64,
+    /// Power dissipated per mechanism during the step of the sample, W (the heat rate R of
+    /// a thermodynamic law, summed over contacts).
+    pub dissipation_power: BTreeMap<String, f64>,
     /// Work done on the grains by gravity since the start, J.
     pub gravity_work: f64,
     /// Work done on the grains by moving walls since the start, J.
@@ -65,6 +68,11 @@ impl ReportSample {
             .map(|(i, n)| (n.clone(), ledger.dissipated.get(i).copied().unwrap_or(0.0)))
             .collect();
         let dissipated_total = ledger.total_dissipated();
+        let dissipation_power: BTreeMap<String, f64> = names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.clone(), e.dissipation_power.get(i).copied().unwrap_or(0.0)))
+            .collect();
         let balance = e.translational_kinetic
             + e.rotational_kinetic
             + e.kinetic_staggering
@@ -81,6 +89,7 @@ impl ReportSample {
             elastic: e.elastic,
             dissipated,
             dissipated_total,
+            dissipation_power,
             gravity_work: ledger.gravity_work,
             wall_work: ledger.wall_work,
             energy_balance: balance,

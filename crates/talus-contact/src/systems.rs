@@ -198,6 +198,7 @@ pub struct ForceAccumulators {
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn apply_contact_forces(
     snapshot: Res<GrainSnapshot>,
+    clock: Res<Clock>,
     channels: Res<DissipationChannels>,
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
@@ -256,6 +257,13 @@ pub fn apply_contact_forces(
     for (total, d) in ledger.dissipated.iter_mut().zip(dissipated.iter()) {
         *total += d;
     }
+    let dt = clock.pass_dt;
+    energy.dissipation_power.clear();
+    energy.dissipation_power.extend(
+        dissipated[..channels.names.len()]
+            .iter()
+            .map(|d| if dt > 0.0 { d / dt } else { 0.0 }),
+    );
     ledger.wall_work += wall_work;
     ledger.integration_error += integration_error;
     energy.elastic = elastic;

@@ -62,6 +62,10 @@ pub struct EnergySnapshot {
     pub kinetic_staggering: f64,
     /// Σ elastic energy stored in contacts.
     pub elastic: f64,
+    /// Power dissipated during the last step, per channel of [`DissipationChannels`]
+    /// (energy dissipated in the step / dt), W. For a law with a heat channel this is its
+    /// heat rate summed over the contacts.
+    pub dissipation_power: Vec<f64>,
     /// Number of active contacts.
     pub contacts: usize,
     /// Largest overlap divided by the smaller radius of the pair (walls: the grain radius).

@@ -38,6 +38,7 @@ pub(crate) struct ExportState {
     walls: Vec<(Entity, EntityPath, WallMode)>,
     stats_paths: Vec<EntityPath>,
     dissipated_paths: Vec<EntityPath>,
+    power_paths: Vec<EntityPath>,
     positions: Vec<[f32; 3]>,
     radii: Vec<f32>,
     speeds: Vec<f64>,
@@ -362,6 +363,22 @@ fn log_stats(
     }
     for (i, path) in s.dissipated_paths.iter().enumerate() {
         let value = ledger.dissipated.get(i).copied().unwrap_or(0.0);
+        rec.log(path.clone(), &rerun::Scalars::single(value))?;
+    }
+    if s.power_paths.len() != names.len() {
+        s.power_paths = names
+            .iter()
+            .map(|name| {
+                EntityPath::new(vec![
+                    STATS_PATH.into(),
+                    "dissipation_power".into(),
+                    EntityPathPart::new(name.as_str()),
+                ])
+            })
+            .collect();
+    }
+    for (i, path) in s.power_paths.iter().enumerate() {
+        let value = energy.dissipation_power.get(i).copied().unwrap_or(0.0);
         rec.log(path.clone(), &rerun::Scalars::single(value))?;
     }
     Ok(())
