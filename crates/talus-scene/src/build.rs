@@ -434,8 +434,39 @@ impl Scene {
                     }
                     material
                 }
-                GrainSource::LammpsData { file, types } => {
-                    grains.extend(self.read_lammps(&cx, k, file, types, two_d, &material_id)?);
+                GrainSource::LammpsData { file, types, replicate } => {
+                    let atoms = self.read_lammps(&cx, k, file, types, two_d, &material_id)?;
+                    let (nx, ny, nz) = replicate.unwrap_or((1, 1, 1));
+                    if nx == 0 || ny == 0 || nz == 0 || (two_d && nz != 1) {
+                        return Err(cx.err(
+                            &field("replicate"),
+                            "positive copy counts (nx, ny, nz), nz = 1 in a 2-D scene",
+                        ));
+                    }
+                    if (nx, ny, nz) == (1, 1, 1) {
+                        grains.extend(atoms);
+                    } else {
+                        let path = self.path.parent().map_or_else(|| Path::new(file).to_path_buf(), |d| d.join(file));
+                        let lengths = crate::lammps::box_lengths(&path).map_err(|e| {
+                            cx.err(&field("file"), format!("a valid LAMMPS data file: {}:{}: {}", path.display(), e.line, e.message))
+                        })?;
+                        let mut shift = DVec3::ZERO;
+                        for (a, n) in [nx, ny, nz].into_iter().enumerate() {
+                            if n > 1 {
+                                shift[a] = lengths[a].ok_or_else(|| {
+                                    cx.err(&field("replicate"), format!("a box length on axis {} in the data file's header to replicate along", ["x", "y", "z"][a]))
+                                })?;
+                            }
+                        }
+                        for iz in 0..nz {
+                            for iy in 0..ny {
+                                for ix in 0..nx {
+                                    let offset = DVec3::new(ix as f64 * shift.x, iy as f64 * shift.y, iz as f64 * shift.z);
+                                    grains.extend(atoms.iter().map(|g| GrainInit { position: g.position + offset, ..*g }));
+                                }
+                            }
+                        }
+                    }
                     continue;
                 }
                 GrainSource::Random {

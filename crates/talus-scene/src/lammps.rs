@@ -48,6 +48,29 @@ pub fn read_data(path: &Path) -> Result<Vec<Atom>, DataError> {
     parse_data(&text)
 }
 
+/// The box lengths of a data file's header (`xlo xhi`, `ylo yhi`, `zlo zhi` lines); an
+/// axis without its line is `None`.
+pub fn box_lengths(path: &Path) -> Result<[Option<f64>; 3], DataError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| err(0, format!("a readable LAMMPS data file ({e})")))?;
+    let mut out = [None; 3];
+    for (k, line) in text.lines().enumerate() {
+        let line = strip(line);
+        if line == "Atoms" {
+            break;
+        }
+        for (a, tag) in ["xlo xhi", "ylo yhi", "zlo zhi"].iter().enumerate() {
+            if line.ends_with(tag) {
+                let f: Vec<&str> = line.split_whitespace().collect();
+                let lo: f64 = number(k + 1, &f, 0, "box bound")?;
+                let hi: f64 = number(k + 1, &f, 1, "box bound")?;
+                out[a] = Some(hi - lo);
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Parses the text of a LAMMPS data file.
 pub fn parse_data(text: &str) -> Result<Vec<Atom>, DataError> {
     let lines: Vec<&str> = text.lines().collect();

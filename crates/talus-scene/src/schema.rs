@@ -316,6 +316,10 @@ pub enum GrainSource {
         file: String,
         /// Which material (and whether frozen) each atom type becomes.
         types: Vec<LammpsType>,
+        /// Copies of the file's atoms along x, y, z, each shifted by the file's box length
+        /// on that axis (`(2, 2, 1)`: four copies side by side). Default: (1, 1, 1).
+        #[serde(default)]
+        replicate: Option<(u32, u32, u32)>,
     },
 }
 
