@@ -465,3 +465,46 @@ fn hertz_mindlin_impacts_from_1e_minus_4_to_1e2_metres_per_second() {
         assert!((e - 0.8).abs() < 0.01 * 0.8, "restitutions {restitutions:?}");
     }
 }
+
+/// The tutorial's cohesive law over the same six decades: slow pairs are captured, fast ones
+/// rebound; nothing turns NaN, overlaps stay bounded, and the kinetic energy after the
+/// encounter never exceeds the kinetic energy before it.
+#[test]
+fn linear_cohesion_impacts_from_1e_minus_4_to_1e2_metres_per_second() {
+    for speed in [1e-4f64, 1e-2, 1.0, 1e2] {
+        // Same glass spheres and stiffness as the linear sweep, a pull of 1e-3 N at touch.
+        let m_eff = 0.5 * 2500.0 * 4.0 / 3.0 * std::f64::consts::PI * 1e-9;
+        let contact_time = std::f64::consts::PI * (m_eff / 1e8f64).sqrt();
+        let x = 0.001 + 1e-7 + 0.5 * speed * 10.0 * contact_time;
+        let text = format!(
+            r#"Scene(
+    name: "sticky-impact",
+    gravity: (0.0, 0.0, 0.0),
+    duration: {duration:e},
+    plugins: ["linear_cohesion"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_cohesion", stiffness: 1e8, restitution: 0.8, friction: 0.3,
+            adhesion_force: 1e-3, adhesion_stiffness: 1e5))],
+    grains: [List(material: "glass", grains: [
+        (position: ({mx:e}, 0.0, 0.0), radius: 0.001, velocity: ({v:e}, 0.0, 0.0)),
+        (position: ({x:e}, 0.0, 0.0), radius: 0.001, velocity: ({mv:e}, 0.0, 0.0)),
+    ])],
+    output: (recording: false),
+)"#,
+            duration = 30.0 * contact_time + 20.0 * 1e-8 / speed.max(1e-6),
+            mx = -x,
+            v = 0.5 * speed,
+            mv = -0.5 * speed,
+        );
+        let (mut sim, steps) = common::build(&text);
+        let course = run_course(&mut sim, steps.min(200_000), 10);
+        let g = common::grains(&mut sim);
+        let approach = -(g[0].velocity.x - g[1].velocity.x);
+        eprintln!(
+            "linear_cohesion, v = {speed:e} m/s: relative velocity after {approach:.4e}, max overlap/R {:.3e}",
+            course.max_overlap_ratio
+        );
+        assert!(course.last.kinetic() <= course.first.kinetic() * (1.0 + 1e-9));
+        assert!(course.max_overlap_ratio < 0.05, "v = {speed}: {}", course.max_overlap_ratio);
+    }
+}
