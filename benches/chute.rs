@@ -46,5 +46,11 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+criterion_group! {
+    name = benches;
+    // No plots: the workspace's plotters carries only the fonts talus-plot registers, so
+    // criterion's own charts cannot draw text. The numbers are what matter here.
+    config = Criterion::default().without_plots();
+    targets = bench
+}
 criterion_main!(benches);
