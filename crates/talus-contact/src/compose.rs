@@ -18,7 +18,9 @@ use talus_core::resources::Dimension;
 use talus_core::schedule::SimBuilder;
 
 use crate::kinematics::ContactKinematics;
-use crate::law::{ContactLaw, ContactResponse, LawDescriptor, PairAssignment, TimeScale, install_law};
+use crate::law::{
+    ContactLaw, ContactResponse, LawDescriptor, PairAssignment, TimeScale, install_law,
+};
 use crate::params::{ParamError, ParamSpec, ParamValues};
 
 /// The place of a sub-model in a composed law, which is also its evaluation order.
@@ -65,6 +67,12 @@ pub struct Needs {
 }
 
 impl Needs {
+    /// A part that torques grains and acts only on touch (rolling, twisting).
+    pub const ROTATION: Needs = Needs {
+        rotation: true,
+        range: 0.0,
+    };
+
     /// The needs of two parts together.
     pub fn union(self, other: Needs) -> Needs {
         Needs {
@@ -227,7 +235,14 @@ pub struct Composed<N, D, T, R = NoRolling, W = NoTwisting, C = NoCohesion>(
 );
 
 /// Per-contact history of a composed law: one field per part.
-pub struct ComposedHistory<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubModel> {
+pub struct ComposedHistory<
+    N: SubModel,
+    D: SubModel,
+    T: SubModel,
+    R: SubModel,
+    W: SubModel,
+    C: SubModel,
+> {
     /// Normal part's history.
     pub normal: N::History,
     /// Damping part's history.
@@ -243,7 +258,14 @@ pub struct ComposedHistory<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W
 }
 
 /// Parameters of a composed law for one pair: one field per part.
-pub struct ComposedParams<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubModel> {
+pub struct ComposedParams<
+    N: SubModel,
+    D: SubModel,
+    T: SubModel,
+    R: SubModel,
+    W: SubModel,
+    C: SubModel,
+> {
     /// Normal part's parameters.
     pub normal: N::Params,
     /// Damping part's parameters.
@@ -314,7 +336,9 @@ const fn channel_bases(counts: [usize; 6]) -> [usize; 6] {
     out
 }
 
-impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubModel> Composed<N, D, T, R, W, C> {
+impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubModel>
+    Composed<N, D, T, R, W, C>
+{
     /// Channel bases in evaluation order: normal, damping, cohesion, tangential,
     /// rolling, twisting.
     const BASES: [usize; 6] = channel_bases([
@@ -327,7 +351,12 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
     ]);
 
     /// The parts' declarations in evaluation order.
-    const PARTS: [(SubModelKind, &'static str, &'static [ParamSpec], &'static [&'static str]); 6] = [
+    const PARTS: [(
+        SubModelKind,
+        &'static str,
+        &'static [ParamSpec],
+        &'static [&'static str],
+    ); 6] = [
         (N::KIND, N::NAME, N::PARAMS, N::DISSIPATION),
         (D::KIND, D::NAME, D::PARAMS, D::DISSIPATION),
         (C::KIND, C::NAME, C::PARAMS, C::DISSIPATION),
@@ -338,7 +367,10 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
 
     /// Dissipation channels of the composed law, part by part.
     pub fn channels() -> Vec<&'static str> {
-        Self::PARTS.iter().flat_map(|p| p.3.iter().copied()).collect()
+        Self::PARTS
+            .iter()
+            .flat_map(|p| p.3.iter().copied())
+            .collect()
     }
 
     /// Declared parameters of all parts, first declaration of a name winning.
@@ -408,21 +440,56 @@ pub struct ComposedLaw<N, D, T, R = NoRolling, W = NoTwisting, C = NoCohesion> {
     _parts: PhantomData<fn() -> (N, D, T, R, W, C)>,
 }
 
-impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubModel> ComposedLaw<N, D, T, R, W, C> {
+impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubModel>
+    ComposedLaw<N, D, T, R, W, C>
+{
     /// A composed law named `name` (its rolling and twisting parts are named by `R` and `W`).
     pub fn new(name: &'static str, summary: &'static str) -> Self {
-        assert_eq!(N::KIND, SubModelKind::Normal, "{}: first part must be normal", N::NAME);
-        assert_eq!(D::KIND, SubModelKind::Damping, "{}: second part must be damping", D::NAME);
-        assert_eq!(T::KIND, SubModelKind::Tangential, "{}: third part must be tangential", T::NAME);
-        assert_eq!(R::KIND, SubModelKind::Rolling, "{}: fourth part must be rolling", R::NAME);
-        assert_eq!(W::KIND, SubModelKind::Twisting, "{}: fifth part must be twisting", W::NAME);
-        assert_eq!(C::KIND, SubModelKind::Cohesion, "{}: sixth part must be cohesion", C::NAME);
+        assert_eq!(
+            N::KIND,
+            SubModelKind::Normal,
+            "{}: first part must be normal",
+            N::NAME
+        );
+        assert_eq!(
+            D::KIND,
+            SubModelKind::Damping,
+            "{}: second part must be damping",
+            D::NAME
+        );
+        assert_eq!(
+            T::KIND,
+            SubModelKind::Tangential,
+            "{}: third part must be tangential",
+            T::NAME
+        );
+        assert_eq!(
+            R::KIND,
+            SubModelKind::Rolling,
+            "{}: fourth part must be rolling",
+            R::NAME
+        );
+        assert_eq!(
+            W::KIND,
+            SubModelKind::Twisting,
+            "{}: fifth part must be twisting",
+            W::NAME
+        );
+        assert_eq!(
+            C::KIND,
+            SubModelKind::Cohesion,
+            "{}: sixth part must be cohesion",
+            C::NAME
+        );
         assert!(
             Composed::<N, D, T, R, W, C>::channels().len() <= MAX_DISSIPATION_CHANNELS,
             "{name}: more than {MAX_DISSIPATION_CHANNELS} dissipation channels"
         );
         let mut label = name.to_string();
-        for (word, part) in [("rolling", part_name::<R>()), ("twisting", part_name::<W>())] {
+        for (word, part) in [
+            ("rolling", part_name::<R>()),
+            ("twisting", part_name::<W>()),
+        ] {
             if let Some(part) = part {
                 label.push_str(&format!("+{word}:{part}"));
             }
@@ -533,12 +600,19 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
         }
         let ts = ts.ok_or_else(|| ParamError {
             field: "law".into(),
-            expected: format!("a law whose parts give a contact time (`{}` gives none)", self.name),
+            expected: format!(
+                "a law whose parts give a contact time (`{}` gives none)",
+                self.name
+            ),
         })?;
         Ok((Box::new(p), ts))
     }
 
-    fn install(&self, sim: &mut SimBuilder, pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)]) {
+    fn install(
+        &self,
+        sim: &mut SimBuilder,
+        pairs: &[(PairAssignment, Box<dyn Any + Send + Sync>)],
+    ) {
         install_law::<Composed<N, D, T, R, W, C>>(sim, self.label, pairs);
     }
 }

@@ -101,19 +101,19 @@ pub fn evaluate_law<L: ContactLaw>(
             .zip(e.par_iter_mut())
             .with_min_len(PARALLEL_MIN_LEN)
             .for_each(|((((c, h), g), f), e)| {
-                let mut kin = kinematics(snapshot, c);
-                let (omega_a, omega_b) = spins(snapshot, c);
+                let Bodies {
+                    mut kin,
+                    omega_a,
+                    omega_b,
+                    wall_velocity,
+                } = bodies(snapshot, c);
                 let branch_shift = kin.set_displacement(g.normal, g.overlap, omega_a, omega_b, dt);
                 let old_force = f.force;
                 let r = L::evaluate(&params[c.pair_slot as usize], &kin, &mut h.0, dt);
                 // The old force acted over the first half of the step, the new one acts
-                // over the second: the trapezoidal rule velocity Verlet integrates.
-                e.boundary_work = match c.kind {
-                    ContactKind::GrainWall => {
-                        0.5 * (f.force + r.force).dot(wall_velocity(snapshot, c.b)) * dt
-                    }
-                    ContactKind::GrainGrain => 0.0,
-                };
+                // over the second: the trapezoidal rule velocity Verlet integrates. Zero for
+                // grain pairs (no wall velocity).
+                e.boundary_work = 0.5 * (old_force + r.force).dot(wall_velocity) * dt;
                 *g = ContactGeometry {
                     normal: kin.normal,
                     overlap: kin.overlap,
@@ -137,9 +137,17 @@ pub fn evaluate_law<L: ContactLaw>(
     }
 }
 
-/// Kinematics of a contact from the snapshot.
+/// What the force loop reads of a contact's bodies, each looked up once.
+struct Bodies {
+    kin: ContactKinematics,
+    omega_a: DVec3,
+    omega_b: DVec3,
+    /// Velocity of the wall (zero for a grain pair).
+    wall_velocity: DVec3,
+}
+
 #[inline]
-pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
+fn bodies(snapshot: &GrainSnapshot, c: &Contact) -> Bodies {
     let i = snapshot
         .dense(c.a)
         .expect("a contact's grain is in the snapshot");
@@ -148,7 +156,12 @@ pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
             let j = snapshot
                 .dense(c.b)
                 .expect("a contact's grain is in the snapshot");
-            ContactKinematics::grain_grain(snapshot, i, j)
+            Bodies {
+                kin: ContactKinematics::grain_grain(snapshot, i, j),
+                omega_a: snapshot.omega[i],
+                omega_b: snapshot.omega[j],
+                wall_velocity: DVec3::ZERO,
+            }
         }
         ContactKind::GrainWall => {
             let w = snapshot
@@ -156,32 +169,20 @@ pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
                 .iter()
                 .find(|w| w.entity == c.b)
                 .expect("a contact's wall is in the snapshot");
-            ContactKinematics::grain_wall(snapshot, i, w)
+            Bodies {
+                kin: ContactKinematics::grain_wall(snapshot, i, w),
+                omega_a: snapshot.omega[i],
+                omega_b: DVec3::ZERO,
+                wall_velocity: w.velocity,
+            }
         }
     }
 }
 
-/// Spins of a contact's bodies (a wall does not spin).
+/// Kinematics of a contact from the snapshot.
 #[inline]
-fn spins(snapshot: &GrainSnapshot, c: &Contact) -> (DVec3, DVec3) {
-    let a = snapshot.omega[snapshot.dense(c.a).expect("contact grain in snapshot")];
-    let b = match c.kind {
-        ContactKind::GrainGrain => {
-            snapshot.omega[snapshot.dense(c.b).expect("contact grain in snapshot")]
-        }
-        ContactKind::GrainWall => DVec3::ZERO,
-    };
-    (a, b)
-}
-
-/// Velocity of a wall of the snapshot.
-#[inline]
-fn wall_velocity(snapshot: &GrainSnapshot, wall: Entity) -> DVec3 {
-    snapshot
-        .walls
-        .iter()
-        .find(|w| w.entity == wall)
-        .map_or(DVec3::ZERO, |w| w.velocity)
+pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
+    bodies(snapshot, c).kin
 }
 
 /// Scratch arrays of [`apply_contact_forces`], kept between steps to avoid allocation.

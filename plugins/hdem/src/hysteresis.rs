@@ -110,7 +110,11 @@ impl BranchShape {
     pub fn new(amplitude: f64, length: f64, ceiling: f64, exponent: f64) -> Self {
         let amplitude = amplitude.max(0.0);
         let length = length.max(0.0);
-        let secant = if length > 0.0 { amplitude / length } else { 0.0 };
+        let secant = if length > 0.0 {
+            amplitude / length
+        } else {
+            0.0
+        };
         Self {
             amplitude,
             length,
@@ -236,12 +240,8 @@ impl HysteresisState {
                 if m * d <= 0.0 {
                     return 0.0;
                 }
-                let shape = BranchShape::new(
-                    m.abs(),
-                    d.abs(),
-                    limits.stiffness_ceiling,
-                    limits.exponent,
-                );
+                let shape =
+                    BranchShape::new(m.abs(), d.abs(), limits.stiffness_ceiling, limits.exponent);
                 (m.abs() * d.abs() - shape.rise_integral(d.abs())).max(0.0)
             }
         }

@@ -15,7 +15,10 @@ use talus_contact::compose::is_two_dimensional;
 use talus_contact::*;
 use talus_linear_spring::rotate_into_plane;
 use talus_rolling_resistance::RollingStiffness;
-use talus_rolling_resistance::element::{centre_inertia_factor, contact_inertia_factor};
+use talus_rolling_resistance::element::{
+    centre_inertia_factor, contact_inertia_factor, contact_spin_inertia, min_spin_inertia,
+    normal_frequency, oscillator_limit, rolling_part, torque_limit,
+};
 
 use crate::hysteresis::{HysteresisLimits, HysteresisState};
 
@@ -136,17 +139,6 @@ pub struct HdemHistory {
     pub stored: f64,
 }
 
-/// The rolling part of a relative rotation: perpendicular to the normal in 3-D, the z
-/// component in 2-D.
-#[inline]
-fn rolling_part(omega: DVec3, normal: DVec3, planar: bool) -> DVec3 {
-    if planar {
-        DVec3::new(0.0, 0.0, omega.z)
-    } else {
-        omega - normal * normal.dot(omega)
-    }
-}
-
 fn required(field: &str, what: &str) -> ParamError {
     ParamError {
         field: field.into(),
@@ -212,10 +204,7 @@ impl<N: SubModel> SubModel for HdemRolling<N> {
     }
 
     fn needs(_values: &ParamValues) -> Needs {
-        Needs {
-            rotation: true,
-            range: 0.0,
-        }
+        Needs::ROTATION
     }
 
     /// As the elastic–plastic part, with the spring at its stiffest, the ceiling times
@@ -226,26 +215,14 @@ impl<N: SubModel> SubModel for HdemRolling<N> {
         let kappa = centre_inertia_factor(planar);
         let omega = match p.stiffness {
             RollingStiffness::Absolute(k) => {
-                let inertia = kappa
-                    * pair.min_effective_mass
-                    * pair.min_effective_radius
-                    * pair.min_effective_radius;
-                (p.stiffness_ceiling * k / inertia).sqrt()
+                (p.stiffness_ceiling * k / min_spin_inertia(pair, planar)).sqrt()
             }
             RollingStiffness::Ratio(ratio) => {
-                let normal = N::resolve(&pair.values, pair).ok()?;
-                let limit = N::time_scale(&normal, pair)?.stability_limit;
-                if !(limit.is_finite() && limit > 0.0) {
-                    return None;
-                }
-                2.0 / limit * (p.stiffness_ceiling * ratio / kappa).sqrt()
+                normal_frequency::<N>(pair)? * (p.stiffness_ceiling * ratio / kappa).sqrt()
             }
         };
         let zeta = p.damping_ratio * (contact_inertia_factor(planar) / kappa).sqrt();
-        (omega.is_finite() && omega > 0.0).then(|| TimeScale {
-            contact_time: f64::INFINITY,
-            stability_limit: 2.0 / omega * ((1.0 + zeta * zeta).sqrt() - zeta),
-        })
+        oscillator_limit(omega, zeta)
     }
 
     #[inline]
@@ -276,7 +253,7 @@ impl<N: SubModel> SubModel for HdemRolling<N> {
         let rate = rolling_part(kin.relative_omega, n, p.planar);
         let limits = HysteresisLimits {
             stiffness,
-            limit_moment: p.friction * s.normal_force().max(0.0) * radius,
+            limit_moment: torque_limit(p.friction, s, radius),
             exponent: p.exponent,
             stiffness_ceiling: p.stiffness_ceiling * stiffness,
         };
@@ -327,7 +304,7 @@ impl<N: SubModel> SubModel for HdemRolling<N> {
         } else {
             rate * -(p.damping_ratio
                 * 2.0
-                * (contact_inertia(p.planar, kin) * stiffness).sqrt())
+                * (contact_spin_inertia(p.planar, kin) * stiffness).sqrt())
         };
         s.dissipate(
             DAMPING_CHANNEL,
@@ -340,12 +317,4 @@ impl<N: SubModel> SubModel for HdemRolling<N> {
         s.torque_a += spring_torque + dashpot;
         s.torque_b -= spring_torque + dashpot;
     }
-}
-
-/// J_z of the contact: Ai et al.'s I_r about the contact point, κ_contact m* R_min²
-/// (exact for equal grains and against a wall; 3/2 m R² for a disk on a wall, the J_z
-/// of seed 001 eq. (19)).
-#[inline]
-fn contact_inertia(planar: bool, kin: &ContactKinematics) -> f64 {
-    contact_inertia_factor(planar) * kin.effective_mass * kin.min_radius * kin.min_radius
 }

@@ -52,8 +52,11 @@ impl SubModel for MindlinTangential {
     const KIND: SubModelKind = SubModelKind::Tangential;
     const NAME: &'static str = "mindlin";
     const PARAMS: &'static [ParamSpec] = TANGENTIAL_PARAMS;
-    const DISSIPATION: &'static [&'static str] =
-        &["tangential_damping", "friction_slip", "mindlin_stiffness_change"];
+    const DISSIPATION: &'static [&'static str] = &[
+        "tangential_damping",
+        "friction_slip",
+        "mindlin_stiffness_change",
+    ];
     type Params = MindlinParams;
     type History = MindlinHistory;
 

@@ -10,7 +10,7 @@
 //! model C with f = 0).
 
 use glam::DVec3;
-use talus_contact::ContactState;
+use talus_contact::{ContactKinematics, ContactState, PairAssignment, SubModel, TimeScale};
 
 /// Index of the dashpot's channel in the part's `DISSIPATION` list.
 pub const DAMPING_CHANNEL: usize = 0;
@@ -28,6 +28,61 @@ pub fn centre_inertia_factor(planar: bool) -> f64 {
 #[inline]
 pub fn contact_inertia_factor(planar: bool) -> f64 {
     centre_inertia_factor(planar) + 1.0
+}
+
+/// The smallest spin inertia a part of this pair can meet, κ m*_min R*_min² (rotation
+/// about the grain's centre), kg m².
+#[inline]
+pub fn min_spin_inertia(pair: &PairAssignment, planar: bool) -> f64 {
+    centre_inertia_factor(planar)
+        * pair.min_effective_mass
+        * pair.min_effective_radius
+        * pair.min_effective_radius
+}
+
+/// Ai et al.'s I_r of a contact about its contact point, κ_contact m* R_min² (exact for
+/// equal grains and against a wall; 3/2 m R² for a disk on a wall), kg m².
+#[inline]
+pub fn contact_spin_inertia(planar: bool, kin: &ContactKinematics) -> f64 {
+    contact_inertia_factor(planar) * kin.effective_mass * kin.min_radius * kin.min_radius
+}
+
+/// The rolling part of a relative spin: perpendicular to the normal in 3-D, the z
+/// component in 2-D (where the normal lies in the xy-plane).
+#[inline]
+pub fn rolling_part(omega: DVec3, normal: DVec3, planar: bool) -> DVec3 {
+    if planar {
+        DVec3::new(0.0, 0.0, omega.z)
+    } else {
+        omega - normal * normal.dot(omega)
+    }
+}
+
+/// Torque limit μ F_n⁺ R of a contact, N m (no tension: an attractive normal force
+/// gives no limit).
+#[inline]
+pub fn torque_limit(friction: f64, state: &ContactState, lever: f64) -> f64 {
+    friction * state.normal_force().max(0.0) * lever
+}
+
+/// Time scale of a stability bound alone (no contact time), for a rotational oscillator
+/// of angular frequency `omega` and damping ratio `zeta`, integrated by the explicit
+/// central-difference scheme: dt < 2/ω (√(1 + ζ²) − ζ). `None` if `omega` is not a
+/// positive finite number.
+pub fn oscillator_limit(omega: f64, zeta: f64) -> Option<TimeScale> {
+    (omega.is_finite() && omega > 0.0).then(|| TimeScale {
+        contact_time: f64::INFINITY,
+        stability_limit: 2.0 / omega * ((1.0 + zeta * zeta).sqrt() - zeta),
+    })
+}
+
+/// Upper estimate of the angular frequency of the normal part `N` for a pair, rad/s:
+/// 2 / its stability limit (which is 2/ω for an undamped spring and shorter with
+/// damping, so this errs on the stiff side).
+pub fn normal_frequency<N: SubModel>(pair: &PairAssignment) -> Option<f64> {
+    let params = N::resolve(&pair.values, pair).ok()?;
+    let limit = N::time_scale(&params, pair)?.stability_limit;
+    (limit.is_finite() && limit > 0.0).then(|| 2.0 / limit)
 }
 
 /// Per-contact history of a [`TorqueSpringLaw`] element.

@@ -17,6 +17,8 @@ use talus_linear_spring::rotate_into_plane;
 
 use crate::element::{
     TorqueSpringHistory, TorqueSpringLaw, centre_inertia_factor, contact_inertia_factor,
+    contact_spin_inertia, min_spin_inertia, normal_frequency, oscillator_limit, rolling_part,
+    torque_limit,
 };
 
 /// Scene name of [`ConstantTorque`].
@@ -87,50 +89,12 @@ const ROLLING_DAMPING_RATIO: ParamSpec = ParamSpec {
     mix: MixRule::Arithmetic,
 };
 
-/// The rolling part of a relative spin: perpendicular to the normal in 3-D, the z
-/// component in 2-D (where the normal lies in the xy-plane).
-#[inline]
-pub(crate) fn rolling_part(omega: DVec3, normal: DVec3, planar: bool) -> DVec3 {
-    if planar {
-        DVec3::new(0.0, 0.0, omega.z)
-    } else {
-        omega - normal * normal.dot(omega)
-    }
-}
-
-/// Torque limit μ F_n⁺ R of a contact, N m (no tension: an attractive normal force
-/// gives no limit).
-#[inline]
-pub(crate) fn torque_limit(friction: f64, state: &ContactState, lever: f64) -> f64 {
-    friction * state.normal_force().max(0.0) * lever
-}
-
 /// The error a part reports for a required parameter the scene left out.
 fn required(field: &str, what: &str, part: &str) -> ParamError {
     ParamError {
         field: field.into(),
         expected: format!("{what}, required by the rolling part `{part}`"),
     }
-}
-
-/// Time scale of a stability bound alone (no contact time), for a rotational oscillator
-/// of angular frequency `omega` and damping ratio `zeta`, integrated by the explicit
-/// central-difference scheme: dt < 2/ω (√(1 + ζ²) − ζ). `None` if `omega` is not a
-/// positive finite number.
-pub(crate) fn oscillator_limit(omega: f64, zeta: f64) -> Option<TimeScale> {
-    (omega.is_finite() && omega > 0.0).then(|| TimeScale {
-        contact_time: f64::INFINITY,
-        stability_limit: 2.0 / omega * ((1.0 + zeta * zeta).sqrt() - zeta),
-    })
-}
-
-/// Upper estimate of the angular frequency of the normal part `N` for a pair, rad/s:
-/// 2 / its stability limit (which is 2/ω for an undamped spring and shorter with
-/// damping, so this errs on the stiff side).
-pub(crate) fn normal_frequency<N: SubModel>(pair: &PairAssignment) -> Option<f64> {
-    let params = N::resolve(&pair.values, pair).ok()?;
-    let limit = N::time_scale(&params, pair)?.stability_limit;
-    (limit.is_finite() && limit > 0.0).then(|| 2.0 / limit)
 }
 
 /// Per-contact history of a part whose torque has no spring: the torque of the last
@@ -185,10 +149,7 @@ impl SubModel for ConstantTorque {
     }
 
     fn needs(_values: &ParamValues) -> Needs {
-        Needs {
-            rotation: true,
-            range: 0.0,
-        }
+        Needs::ROTATION
     }
 
     #[inline]
@@ -267,20 +228,14 @@ impl SubModel for ViscousRolling {
     }
 
     fn needs(_values: &ParamValues) -> Needs {
-        Needs {
-            rotation: true,
-            range: 0.0,
-        }
+        Needs::ROTATION
     }
 
     /// The explicit dashpot on a spin is stable for dt < 2 I / c_r; I is bounded below by
     /// the spin inertia of the lightest, smallest contact, κ m*_min R*_min² (κ = 2/5 for
     /// spheres, 1/2 for disks; exact against a wall, conservative between grains).
     fn time_scale(p: &ViscousParams, pair: &PairAssignment) -> Option<TimeScale> {
-        let inertia = centre_inertia_factor(is_two_dimensional(pair))
-            * pair.min_effective_mass
-            * pair.min_effective_radius
-            * pair.min_effective_radius;
+        let inertia = min_spin_inertia(pair, is_two_dimensional(pair));
         let limit = 2.0 * inertia / p.damping;
         (limit.is_finite() && limit > 0.0).then_some(TimeScale {
             contact_time: f64::INFINITY,
@@ -409,10 +364,7 @@ impl<N: SubModel> SubModel for ElasticPlasticRolling<N> {
     }
 
     fn needs(_values: &ParamValues) -> Needs {
-        Needs {
-            rotation: true,
-            range: 0.0,
-        }
+        Needs::ROTATION
     }
 
     /// The rolling spring against the spin inertia of the lightest contact (rotation about
@@ -424,13 +376,7 @@ impl<N: SubModel> SubModel for ElasticPlasticRolling<N> {
         let planar = is_two_dimensional(pair);
         let kappa = centre_inertia_factor(planar);
         let omega = match p.stiffness {
-            RollingStiffness::Absolute(k) => {
-                let inertia = kappa
-                    * pair.min_effective_mass
-                    * pair.min_effective_radius
-                    * pair.min_effective_radius;
-                (k / inertia).sqrt()
-            }
+            RollingStiffness::Absolute(k) => (k / min_spin_inertia(pair, planar)).sqrt(),
             RollingStiffness::Ratio(beta) => normal_frequency::<N>(pair)? * (beta / kappa).sqrt(),
         };
         let zeta = p.damping_ratio * (contact_inertia_factor(planar) / kappa).sqrt();
@@ -475,8 +421,7 @@ impl<N: SubModel> SubModel for ElasticPlasticRolling<N> {
         let rate = rolling_part(kin.relative_omega, n, p.planar);
         // Ai et al.'s I_r = [1/(I_a + m_a R_a²) + 1/(I_b + m_b R_b²)]⁻¹ about the contact
         // point, taken as κ_contact m* R_min²: exact for equal grains and against a wall.
-        let inertia =
-            contact_inertia_factor(p.planar) * kin.effective_mass * kin.min_radius * kin.min_radius;
+        let inertia = contact_spin_inertia(p.planar, kin);
         let element = TorqueSpringLaw {
             stiffness,
             damping: p.damping_ratio * 2.0 * (inertia * stiffness).sqrt(),

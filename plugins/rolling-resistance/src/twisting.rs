@@ -14,7 +14,7 @@ use talus_contact::compose::is_two_dimensional;
 use talus_contact::*;
 
 use crate::element::{TorqueSpringHistory, TorqueSpringLaw, centre_inertia_factor};
-use crate::rolling::{normal_frequency, oscillator_limit, torque_limit};
+use crate::element::{normal_frequency, oscillator_limit, torque_limit};
 
 /// Scene name of [`SpringDashpotTwisting`].
 pub const SPRING_DASHPOT: &str = "spring_dashpot";
@@ -108,10 +108,7 @@ impl<N: SubModel> SubModel for SpringDashpotTwisting<N> {
     }
 
     fn needs(_values: &ParamValues) -> Needs {
-        Needs {
-            rotation: true,
-            range: 0.0,
-        }
+        Needs::ROTATION
     }
 
     /// ω_tw² = χ k_n R* δ / I_tw with I_tw ≥ (2/5) m* R*² (rotation about the normal of
