@@ -33,14 +33,19 @@ fn bench(c: &mut Criterion) {
     group.sample_size(10);
     for replicate in [1u32, 2, 4] {
         for threads in [1usize, 2] {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
             let (mut sim, n) = pool.install(|| chute(replicate));
             // Warm the flow past its first neighbour-list builds.
             pool.install(|| sim.run_steps(20).unwrap());
             group.throughput(Throughput::Elements(10 * n as u64));
-            group.bench_with_input(BenchmarkId::new(format!("{n} grains"), threads), &threads, |b, _| {
-                b.iter(|| pool.install(|| sim.run_steps(10).unwrap()))
-            });
+            group.bench_with_input(
+                BenchmarkId::new(format!("{n} grains"), threads),
+                &threads,
+                |b, _| b.iter(|| pool.install(|| sim.run_steps(10).unwrap())),
+            );
         }
     }
     group.finish();

@@ -40,7 +40,9 @@ fn hertz_contact_time_study_converges_at_second_order() {
         assert!(order > 1.7, "order {order:.2} from errors {refined:?}");
     }
     assert!(refined[4] < 1e-5, "{refined:?}");
-    let fastest = result.fastest_within_tolerance.expect("a setting within 1e-2");
+    let fastest = result
+        .fastest_within_tolerance
+        .expect("a setting within 1e-2");
     assert!(result.rows[fastest].error <= 1e-2);
     for f in &result.files {
         assert!(std::fs::metadata(f).unwrap().len() > 100, "{}", f.display());
@@ -80,12 +82,28 @@ fn every_integrator_integrates_free_fall_exactly() {
         sim.run_steps(steps).unwrap();
         let g = common::grains(&mut sim)[0];
         let t = 0.1;
-        let euler_offset = if integrator == "SymplecticEuler" { -0.5 * 9.81 * 1e-4 * t } else { 0.0 };
+        let euler_offset = if integrator == "SymplecticEuler" {
+            -0.5 * 9.81 * 1e-4 * t
+        } else {
+            0.0
+        };
         let z = 1.0 + 2.0 * t - 0.5 * 9.81 * t * t + euler_offset;
-        assert!((g.position.z - z).abs() < 1e-12, "{integrator}: z {} vs {z}", g.position.z);
-        assert!((g.position.x - 0.03).abs() < 1e-12, "{integrator}: x {}", g.position.x);
+        assert!(
+            (g.position.z - z).abs() < 1e-12,
+            "{integrator}: z {} vs {z}",
+            g.position.z
+        );
+        assert!(
+            (g.position.x - 0.03).abs() < 1e-12,
+            "{integrator}: x {}",
+            g.position.x
+        );
         let vz = 2.0 - 9.81 * t;
-        assert!((g.velocity.z - vz).abs() < 1e-11, "{integrator}: vz {} vs {vz}", g.velocity.z);
+        assert!(
+            (g.velocity.z - vz).abs() < 1e-11,
+            "{integrator}: vz {} vs {vz}",
+            g.velocity.z
+        );
     }
 }
 
@@ -105,7 +123,8 @@ fn critical_step_fractions_converge_too() {
         ),
     )
     .unwrap();
-    let result = run_study(&study, &talus::registry(), &dir.join("out")).unwrap_or_else(|e| panic!("{e}"));
+    let result =
+        run_study(&study, &talus::registry(), &dir.join("out")).unwrap_or_else(|e| panic!("{e}"));
     let errors: Vec<f64> = result.rows.iter().map(|r| r.error).collect();
     let steps: Vec<f64> = result.rows.iter().map(|r| r.dt).collect();
     eprintln!("critical fractions: dt {steps:?}, errors {errors:?}");

@@ -12,7 +12,9 @@ use talus::cli::ReportSample;
 fn chute_reproduces_lammps_kinetic_energies_over_100_steps() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench/chute.ron");
     let scene = talus::scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
-    let built = scene.build(&talus::registry()).unwrap_or_else(|e| panic!("{e}"));
+    let built = scene
+        .build(&talus::registry())
+        .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(built.grain_count, 32_000);
     let steps = built.stop.steps;
     assert_eq!(steps, 100);
@@ -20,8 +22,16 @@ fn chute_reproduces_lammps_kinetic_energies_over_100_steps() {
     sim.prime().unwrap();
     let start = ReportSample::take(&sim.world);
     // Step 0 is the data file itself: both sums must match LAMMPS to its 8 printed digits.
-    assert!((start.translational_kinetic - 784139.13).abs() < 0.01, "{}", start.translational_kinetic);
-    assert!((start.rotational_kinetic - 1601.1263).abs() < 1e-4, "{}", start.rotational_kinetic);
+    assert!(
+        (start.translational_kinetic - 784139.13).abs() < 0.01,
+        "{}",
+        start.translational_kinetic
+    );
+    assert!(
+        (start.rotational_kinetic - 1601.1263).abs() < 1e-4,
+        "{}",
+        start.rotational_kinetic
+    );
     sim.run_steps(steps).unwrap();
     let end = ReportSample::take(&sim.world);
     let gain = end.translational_kinetic - start.translational_kinetic;
@@ -32,7 +42,10 @@ fn chute_reproduces_lammps_kinetic_energies_over_100_steps() {
         end.rotational_kinetic,
         (end.rotational_kinetic - 1571.0968) / 1571.0968
     );
-    assert!((gain - lammps_gain).abs() < 0.02 * lammps_gain, "gain {gain}");
+    assert!(
+        (gain - lammps_gain).abs() < 0.02 * lammps_gain,
+        "gain {gain}"
+    );
     assert!(
         (end.rotational_kinetic - 1571.0968).abs() < 1e-3 * 1571.0968,
         "rotational {}",
@@ -48,11 +61,20 @@ fn the_replicated_chute_tiles_the_same_state() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench");
     let text = std::fs::read_to_string(root.join("chute.ron"))
         .unwrap()
-        .replace("periodic: (x: (0.0, 40.0), y: (0.0, 20.0)),", "periodic: (x: (0.0, 80.0), y: (0.0, 40.0)),")
-        .replace("grains: [LammpsData(file: \"data.chute\",", "grains: [LammpsData(file: \"data.chute\", replicate: (2, 2, 1),")
+        .replace(
+            "periodic: (x: (0.0, 40.0), y: (0.0, 20.0)),",
+            "periodic: (x: (0.0, 80.0), y: (0.0, 40.0)),",
+        )
+        .replace(
+            "grains: [LammpsData(file: \"data.chute\",",
+            "grains: [LammpsData(file: \"data.chute\", replicate: (2, 2, 1),",
+        )
         .replace("steps: 100,", "steps: 5,");
-    let scene = talus::scene::parse(root.join("chute-2x2.ron"), &text).unwrap_or_else(|e| panic!("{e}"));
-    let built = scene.build(&talus::registry()).unwrap_or_else(|e| panic!("{e}"));
+    let scene =
+        talus::scene::parse(root.join("chute-2x2.ron"), &text).unwrap_or_else(|e| panic!("{e}"));
+    let built = scene
+        .build(&talus::registry())
+        .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(built.grain_count, 128_000);
     let mut sim = built.builder.build();
     sim.prime().unwrap();

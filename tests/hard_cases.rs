@@ -163,7 +163,11 @@ fn stiffness_ratio_of_ten_thousand_in_an_elastic_gas() {
     // Elastic, frictionless: the energy is conserved up to the integrator's error.
     assert!(drift < 1e-4, "energy drift {drift:e}");
     assert!(course.max_energy_rise / e0 < 1e-4);
-    assert!(course.max_overlap_ratio < 0.1, "{}", course.max_overlap_ratio);
+    assert!(
+        course.max_overlap_ratio < 0.1,
+        "{}",
+        course.max_overlap_ratio
+    );
     assert!(course.last.dissipated_total.abs() < 1e-12 * e0);
 }
 
@@ -269,13 +273,20 @@ fn impact_speeds_from_1e_minus_4_to_1e2_metres_per_second() {
         );
         restitutions.push(e);
         assert!(course.last.kinetic() <= course.first.kinetic());
-        assert!(course.max_overlap_ratio < 0.05, "v = {speed}: {}", course.max_overlap_ratio);
+        assert!(
+            course.max_overlap_ratio < 0.05,
+            "v = {speed}: {}",
+            course.max_overlap_ratio
+        );
     }
     // At the default 50 steps per collision the restitution depends on the phase at
     // which the contact starts within a step (the dashpot acts for the whole first step):
     // measured 0.7926 to 0.7997 for e = 0.8. The speed itself must not matter beyond that.
     for e in &restitutions {
-        assert!((e - 0.8).abs() < 0.015 * 0.8, "restitutions {restitutions:?}");
+        assert!(
+            (e - 0.8).abs() < 0.015 * 0.8,
+            "restitutions {restitutions:?}"
+        );
     }
 }
 
@@ -363,7 +374,10 @@ fn too_large_a_time_step_stops_with_a_diagnosis_and_the_last_good_state() {
             assert!(message.contains("step"), "{message}");
             assert!(message.contains("overlap"), "{message}");
             assert!(message.contains("grain"), "names the grain: {message}");
-            assert!(message.contains("wall `floor`"), "names the wall: {message}");
+            assert!(
+                message.contains("wall `floor`"),
+                "names the wall: {message}"
+            );
             let state = dir.join("out").join("last_good_state.json");
             let text = std::fs::read_to_string(&state).expect("last good state written");
             let json: serde_json::Value = serde_json::from_str(&text).unwrap();
@@ -404,19 +418,31 @@ fn a_dense_packing_under_high_confining_pressure_stays_stable() {
     let (mut sim, steps) = common::build(text);
     let course = run_course(&mut sim, steps, 200);
     let wall_work = course.last.wall_work;
-    let book = (course.last.bookkeeping_balance - course.first.bookkeeping_balance).abs() / wall_work;
+    let book =
+        (course.last.bookkeeping_balance - course.first.bookkeeping_balance).abs() / wall_work;
     eprintln!(
         "squeeze: piston work {wall_work:.3e} J, max overlap/R {:.3e}, bookkeeping {book:.2e}, dissipated {:.3e} J",
         course.max_overlap_ratio, course.last.dissipated_total
     );
     assert!(wall_work > 0.0, "the piston pushed");
     // The piston advanced 0.4 mm into a packing 10 mm tall: a few per cent of strain.
-    assert!(course.max_overlap_ratio > 0.01, "the packing was squeezed: {}", course.max_overlap_ratio);
-    assert!(course.max_overlap_ratio < 0.2, "overlap {}", course.max_overlap_ratio);
+    assert!(
+        course.max_overlap_ratio > 0.01,
+        "the packing was squeezed: {}",
+        course.max_overlap_ratio
+    );
+    assert!(
+        course.max_overlap_ratio < 0.2,
+        "overlap {}",
+        course.max_overlap_ratio
+    );
     assert!(book < 1e-6, "bookkeeping drift {book:e}");
     // Energy in the grains never exceeds the work of gravity and the piston.
     let stored = course.last.kinetic() + course.last.elastic;
-    assert!(stored <= course.last.gravity_work + wall_work + course.first.kinetic() + course.first.elastic);
+    assert!(
+        stored
+            <= course.last.gravity_work + wall_work + course.first.kinetic() + course.first.elastic
+    );
 }
 
 /// The same sweep with Hertz–Mindlin (steel spheres of 1 mm, e = 0.8, μ = 0.3): its
@@ -455,14 +481,27 @@ fn hertz_mindlin_impacts_from_1e_minus_4_to_1e2_metres_per_second() {
         let course = run_course(&mut sim, steps, 1);
         let g = common::grains(&mut sim);
         let e = -(g[0].velocity.x - g[1].velocity.x) / speed;
-        eprintln!("Hertz–Mindlin, v = {speed:e} m/s: restitution {e:.6}, max overlap/R {:.3e}", course.max_overlap_ratio);
+        eprintln!(
+            "Hertz–Mindlin, v = {speed:e} m/s: restitution {e:.6}, max overlap/R {:.3e}",
+            course.max_overlap_ratio
+        );
         restitutions.push(e);
-        assert_eq!(course.last.contacts, 0, "v = {speed}: the spheres separated");
+        assert_eq!(
+            course.last.contacts, 0,
+            "v = {speed}: the spheres separated"
+        );
         assert!(course.last.kinetic() <= course.first.kinetic());
-        assert!(course.max_overlap_ratio < 0.1, "v = {speed}: {}", course.max_overlap_ratio);
+        assert!(
+            course.max_overlap_ratio < 0.1,
+            "v = {speed}: {}",
+            course.max_overlap_ratio
+        );
     }
     for e in &restitutions {
-        assert!((e - 0.8).abs() < 0.01 * 0.8, "restitutions {restitutions:?}");
+        assert!(
+            (e - 0.8).abs() < 0.01 * 0.8,
+            "restitutions {restitutions:?}"
+        );
     }
 }
 
@@ -505,6 +544,10 @@ fn linear_cohesion_impacts_from_1e_minus_4_to_1e2_metres_per_second() {
             course.max_overlap_ratio
         );
         assert!(course.last.kinetic() <= course.first.kinetic() * (1.0 + 1e-9));
-        assert!(course.max_overlap_ratio < 0.05, "v = {speed}: {}", course.max_overlap_ratio);
+        assert!(
+            course.max_overlap_ratio < 0.05,
+            "v = {speed}: {}",
+            course.max_overlap_ratio
+        );
     }
 }

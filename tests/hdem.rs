@@ -250,8 +250,8 @@ fn conventional_rocking_has_constant_frequency_and_decays_at_zeta() {
         .fold((f64::INFINITY, 0.0f64), |(l, h), f| (l.min(*f), h.max(*f)));
     let mean = frequencies.iter().sum::<f64>() / frequencies.len() as f64;
     // ζ from the decrement of successive peaks: ln(p_k/p_{k+1}) = π ζ/√(1 − ζ²).
-    let decrement = (window[0].peak / window[window.len() - 1].peak).ln()
-        / (window.len() - 1) as f64;
+    let decrement =
+        (window[0].peak / window[window.len() - 1].peak).ln() / (window.len() - 1) as f64;
     let zeta = decrement / (std::f64::consts::PI.powi(2) + decrement * decrement).sqrt();
     eprintln!(
         "conventional: {} half cycles, ω from crossings {lo:.4}..{hi:.4} rad/s (spread {:.2e}), mean {mean:.4}, \
@@ -260,7 +260,10 @@ fn conventional_rocking_has_constant_frequency_and_decays_at_zeta() {
         (hi - lo) / mean
     );
     assert!((hi - lo) / mean < 0.01, "frequency spread {lo}..{hi}");
-    assert!((mean - damped).abs() / damped < 0.01, "mean ω {mean}, analytic {damped}");
+    assert!(
+        (mean - damped).abs() / damped < 0.01,
+        "mean ω {mean}, analytic {damped}"
+    );
     assert!(
         (zeta - CONVENTIONAL_ZETA).abs() / CONVENTIONAL_ZETA < 0.01,
         "ζ measured {zeta}"
@@ -288,7 +291,11 @@ fn hdem_frequency_rises_and_it_rests_sooner() {
             .collect::<Vec<_>>()
             .join(" ")
     );
-    assert!(frequencies.len() >= 8, "only {} half cycles", frequencies.len());
+    assert!(
+        frequencies.len() >= 8,
+        "only {} half cycles",
+        frequencies.len()
+    );
     // Over the last cycles, each full cycle (two half cycles, so that the asymmetry
     // between the halves cancels) is faster than the one before.
     let full: Vec<f64> = frequencies
@@ -307,7 +314,10 @@ fn hdem_frequency_rises_and_it_rests_sooner() {
         "at rest (|ω| < {threshold:.1e} rad/s for good): HDEM after {t_h:.3} s, conventional after {t_c:.3} s; \
          frequency rise over the window {rise:.3}"
     );
-    assert!(t_h < t_c, "HDEM at rest after {t_h} s, conventional after {t_c} s");
+    assert!(
+        t_h < t_c,
+        "HDEM at rest after {t_h} s, conventional after {t_c} s"
+    );
 }
 
 /// Near rest the hysteresis spring takes a growing share of the dissipation: its loss
@@ -355,7 +365,10 @@ fn hdem_does_not_chatter_at_rest() {
         "HDEM, last second: {flips} sign changes in {steps} steps (bound {bound}); largest |ω| {largest:.2e} rad/s"
     );
     assert!(flips <= bound, "{flips} sign changes");
-    assert!(largest < 1e-5 * SPEED / RADIUS, "still moving: {largest:e} rad/s");
+    assert!(
+        largest < 1e-5 * SPEED / RADIUS,
+        "still moving: {largest:e} rad/s"
+    );
 }
 
 /// The bookkeeping balance of a rocking run closes to 1e-6 of the initial kinetic
@@ -368,7 +381,11 @@ fn rocking_bookkeeping_closes() {
         let last = r.time.len() - 1;
         eprintln!(
             "{dimension}-D {}: bookkeeping drift {drift:.2e} of {:.3e} J; dissipated hysteresis {:.3e}, damping {:.3e}, slip {:.3e} J",
-            if contact.contains("hdem") { "HDEM" } else { "conventional" },
+            if contact.contains("hdem") {
+                "HDEM"
+            } else {
+                "conventional"
+            },
             r.initial_kinetic,
             r.hysteresis[last],
             r.damping[last],
@@ -390,12 +407,14 @@ fn hdem_sphere_frequency_rises() {
         .collect();
     eprintln!(
         "HDEM sphere: ω per full cycle {}",
-        full.iter().map(|f| format!("{f:.2}")).collect::<Vec<_>>().join(" ")
+        full.iter()
+            .map(|f| format!("{f:.2}"))
+            .collect::<Vec<_>>()
+            .join(" ")
     );
     assert!(full.len() >= 3);
     assert!(full[full.len() - 1] > full[0], "{full:?}");
 }
-
 
 /// Folder the ignored data-writing tests fill, read by the `hdem_figures` example of
 /// `plugins/hdem` to draw `docs/laws/figures/hdem-*.svg`.
@@ -433,7 +452,9 @@ fn write_rocking_figure_data() {
         std::fs::write(dir.join(format!("rocking-{label}.csv")), series).unwrap();
         let mut cycles = String::from("time,frequency,peak_spin,peak_kinetic,hysteresis,damping\n");
         for c in r.half_cycles() {
-            let peak_kinetic = r.kinetic[c.first..c.last].iter().fold(0.0f64, |m, k| m.max(*k));
+            let peak_kinetic = r.kinetic[c.first..c.last]
+                .iter()
+                .fold(0.0f64, |m, k| m.max(*k));
             writeln!(
                 cycles,
                 "{:e},{:e},{:e},{:e},{:e},{:e}",
@@ -447,7 +468,10 @@ fn write_rocking_figure_data() {
             .unwrap();
         }
         std::fs::write(dir.join(format!("cycles-{label}.csv")), cycles).unwrap();
-        eprintln!("wrote {label}: rest at {:.3} s", r.rest_time(1e-4 * SPEED / RADIUS));
+        eprintln!(
+            "wrote {label}: rest at {:.3} s",
+            r.rest_time(1e-4 * SPEED / RADIUS)
+        );
     }
 }
 
@@ -468,7 +492,9 @@ struct Heap {
 fn heap_scene(rolling: &str) -> String {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hdem-heap.ron");
     let text = std::fs::read_to_string(&path).unwrap();
-    let start = text.find("rolling: \"hdem\"").expect("the scene's rolling part");
+    let start = text
+        .find("rolling: \"hdem\"")
+        .expect("the scene's rolling part");
     let end = start + text[start..].find('\n').unwrap();
     format!("{}{rolling}{}", &text[..start], &text[end..])
 }
@@ -480,9 +506,11 @@ fn heap_scene(rolling: &str) -> String {
 /// contiguous stretch from the summit outwards down to 20 %.
 fn repose_angle(grains: &[common::GrainState]) -> ((f64, f64), f64) {
     let width = 2.0 * grains.iter().fold(0.0f64, |m, g| m.max(g.radius));
-    let (lo, hi) = grains.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), g| {
-        (l.min(g.position.x), h.max(g.position.x))
-    });
+    let (lo, hi) = grains
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), g| {
+            (l.min(g.position.x), h.max(g.position.x))
+        });
     let bins = ((hi - lo) / width).ceil() as usize + 1;
     let mut top = vec![0.0f64; bins];
     for g in grains {
@@ -552,11 +580,21 @@ fn heap_angle_of_repose_and_time_to_rest() {
     use std::fmt::Write as _;
     let models = [
         ("none", String::new()),
-        ("constant_torque", r#"rolling: "constant_torque", rolling_friction: 0.1,"#.to_string()),
-        ("elastic_plastic", r#"rolling: "elastic_plastic", rolling_friction: 0.1,"#.to_string()),
-        ("hdem", r#"rolling: "hdem", rolling_friction: 0.1,"#.to_string()),
+        (
+            "constant_torque",
+            r#"rolling: "constant_torque", rolling_friction: 0.1,"#.to_string(),
+        ),
+        (
+            "elastic_plastic",
+            r#"rolling: "elastic_plastic", rolling_friction: 0.1,"#.to_string(),
+        ),
+        (
+            "hdem",
+            r#"rolling: "hdem", rolling_friction: 0.1,"#.to_string(),
+        ),
     ];
-    let mut table = String::from("model,angle_deg,left_deg,right_deg,height_m,rest_s,kinetic_end_J\n");
+    let mut table =
+        String::from("model,angle_deg,left_deg,right_deg,height_m,rest_s,kinetic_end_J\n");
     for (name, rolling) in models {
         let h = heap(&rolling);
         eprintln!(
@@ -565,7 +603,9 @@ fn heap_angle_of_repose_and_time_to_rest() {
             h.flanks.0,
             h.flanks.1,
             h.height,
-            h.rest.map_or("not within the run".to_string(), |t| format!("after {t:.3} s")),
+            h.rest.map_or("not within the run".to_string(), |t| format!(
+                "after {t:.3} s"
+            )),
             h.kinetic_end
         );
         writeln!(
@@ -588,7 +628,10 @@ fn heap_angle_of_repose_and_time_to_rest() {
 /// full rocking cycle in that second is shorter than the conventional one's.
 #[test]
 fn rocking_scenes_rock() {
-    for (file, dimension) in [("scenes/hdem-rocking.ron", 2u8), ("scenes/hdem-rocking-3d.ron", 3)] {
+    for (file, dimension) in [
+        ("scenes/hdem-rocking.ron", 2u8),
+        ("scenes/hdem-rocking-3d.ron", 3),
+    ] {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
         let text = std::fs::read_to_string(&path).unwrap();
         let text = text.replace("duration: 4.5,", "duration: 1.0,");
@@ -600,7 +643,9 @@ fn rocking_scenes_rock() {
         for step in 1..=steps {
             sim.step().unwrap();
             let mut grains = common::grains(&mut sim);
-            grains.sort_by(|a, b| (a.position.x + a.position.y).total_cmp(&(b.position.x + b.position.y)));
+            grains.sort_by(|a, b| {
+                (a.position.x + a.position.y).total_cmp(&(b.position.x + b.position.y))
+            });
             for (k, g) in grains.iter().enumerate() {
                 let w = rolling_spin(dimension, g.omega);
                 if w * previous[k] < 0.0 {
@@ -617,8 +662,14 @@ fn rocking_scenes_rock() {
             last_cycle(&crossings[0]),
             last_cycle(&crossings[1])
         );
-        assert!(crossings.iter().all(|c| c.len() >= 10), "{file}: not rocking");
-        assert!(last_cycle(&crossings[1]) < last_cycle(&crossings[0]), "{file}");
+        assert!(
+            crossings.iter().all(|c| c.len() >= 10),
+            "{file}: not rocking"
+        );
+        assert!(
+            last_cycle(&crossings[1]) < last_cycle(&crossings[0]),
+            "{file}"
+        );
     }
 }
 
@@ -651,10 +702,19 @@ fn hdem_with_hertz_mindlin_and_twisting_runs_and_balances() {
         )
         .replace(r#"plugins: ["linear_spring"]"#, r#"plugins: ["hertz_mindlin"]"#);
     // Add a spin about the floor normal (z) to the rolling spin about y.
-    let at = text.find("angular_velocity: (0.0, ").expect("the grain's spin");
+    let at = text
+        .find("angular_velocity: (0.0, ")
+        .expect("the grain's spin");
     let close = at + text[at..].find(", 0.0)").unwrap();
-    let text = format!("{}, 3.0){}", &text[..close], &text[close + ", 0.0)".len()..]);
-    assert!(text.contains("hertz_mindlin") && text.contains(", 3.0)"), "{text}");
+    let text = format!(
+        "{}, 3.0){}",
+        &text[..close],
+        &text[close + ", 0.0)".len()..]
+    );
+    assert!(
+        text.contains("hertz_mindlin") && text.contains(", 3.0)"),
+        "{text}"
+    );
     let (mut sim, steps) = common::build(&text);
     sim.prime().unwrap();
     let initial = ReportSample::take(&sim.world).kinetic();

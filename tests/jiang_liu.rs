@@ -358,8 +358,12 @@ fn scene_errors_name_the_field() {
 /// heat booked.
 #[test]
 fn report_heat_rate_is_never_negative_and_integrates_to_the_heat() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/jiang-liu-head-on.ron");
-    let built = talus::scene::load(&path).unwrap().build(&talus::registry()).unwrap();
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/jiang-liu-head-on.ron");
+    let built = talus::scene::load(&path)
+        .unwrap()
+        .build(&talus::registry())
+        .unwrap();
     let steps = built.stop.steps;
     let mut sim = built.builder.build();
     sim.prime().unwrap();
@@ -376,5 +380,8 @@ fn report_heat_rate_is_never_negative_and_integrates_to_the_heat() {
     let last = talus::cli::ReportSample::take(&sim.world);
     let heat = last.dissipated["heat"];
     assert!(positive > 10 && heat > 0.0);
-    assert!((integral - heat).abs() <= 1e-9 * heat, "∫R dt = {integral:e}, heat {heat:e}");
+    assert!(
+        (integral - heat).abs() <= 1e-9 * heat,
+        "∫R dt = {integral:e}, heat {heat:e}"
+    );
 }

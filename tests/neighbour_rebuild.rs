@@ -4,7 +4,6 @@
 
 mod common;
 
-use bevy_ecs::prelude::*;
 use talus::collision::NeighbourList;
 use talus::contact::{Contact, LawState};
 use talus_linear_spring::TangentialSpring;
@@ -51,7 +50,12 @@ fn run(rebuild_every_step: bool) -> (Vec<[u64; 9]>, Vec<((u64, u64), [u64; 3])>,
     let mut q = sim.world.query::<(&Contact, &LawState<TangentialSpring>)>();
     let mut springs: Vec<((u64, u64), [u64; 3])> = q
         .iter(&sim.world)
-        .map(|(c, h)| ((c.a.to_bits(), c.b.to_bits()), h.0.spring.to_array().map(f64::to_bits)))
+        .map(|(c, h)| {
+            (
+                (c.a.to_bits(), c.b.to_bits()),
+                h.0.spring.to_array().map(f64::to_bits),
+            )
+        })
         .collect();
     springs.sort();
     let builds = sim.world.resource::<NeighbourList>().builds;
@@ -64,7 +68,10 @@ fn rebuilding_the_neighbour_list_every_step_changes_nothing() {
     let (grains_eager, springs_eager, builds_eager) = run(true);
     eprintln!("neighbour list builds: {builds_lazy} (as needed), {builds_eager} (every step)");
     assert!(builds_lazy < builds_eager / 4, "the skin saves most builds");
-    assert!(springs_lazy.iter().any(|(_, s)| *s != [0; 3]), "some contact holds a spring");
+    assert!(
+        springs_lazy.iter().any(|(_, s)| *s != [0; 3]),
+        "some contact holds a spring"
+    );
     assert_eq!(grains_lazy, grains_eager, "grain states differ");
     assert_eq!(springs_lazy, springs_eager, "tangential springs differ");
 }

@@ -48,7 +48,10 @@ fn a_collision_through_the_seam_is_the_collision_in_the_middle() {
     let (middle, steps_middle) = run_pair(0.0895, 0.1105);
     let (seam, steps_seam) = run_pair(0.1895, 0.0105);
     assert!(steps_middle > 100, "the grains collided in the middle");
-    assert_eq!(steps_middle, steps_seam, "same contact duration through the seam");
+    assert_eq!(
+        steps_middle, steps_seam,
+        "same contact duration through the seam"
+    );
     let e = -(middle[0].velocity.x - middle[1].velocity.x) / 1.0;
     assert!((e - 0.7).abs() < 0.005 * 0.7, "restitution {e}");
     for (m, s) in middle.iter().zip(&seam) {
@@ -61,8 +64,15 @@ fn a_collision_through_the_seam_is_the_collision_in_the_middle() {
         // Positions agree modulo the box (the seam pair started 0.1 m further right).
         let shift = s.position - m.position - DVec3::new(0.1, 0.0, 0.0);
         let wrapped = shift.x - 0.2 * (shift.x / 0.2).round();
-        assert!(wrapped.abs() < 1e-12 && shift.y.abs() < 1e-12, "shift {shift:?}");
-        assert!((0.0..0.2).contains(&s.position.x), "wrapped into the box: {}", s.position.x);
+        assert!(
+            wrapped.abs() < 1e-12 && shift.y.abs() < 1e-12,
+            "shift {shift:?}"
+        );
+        assert!(
+            (0.0..0.2).contains(&s.position.x),
+            "wrapped into the box: {}",
+            s.position.x
+        );
     }
 }
 
@@ -113,12 +123,18 @@ fn a_frictional_gas_in_a_periodic_box_conserves_momentum_and_energy() {
     let (p0, scale) = momentum(&mut sim);
     let mut seams = 0;
     let mut wrapped = 0;
-    let mut previous: Vec<DVec3> = common::grains(&mut sim).iter().map(|g| g.position).collect();
+    let mut previous: Vec<DVec3> = common::grains(&mut sim)
+        .iter()
+        .map(|g| g.position)
+        .collect();
     for step in 1..=steps {
         sim.step().unwrap();
         if step % 20 == 0 {
             seams += seam_contacts(&mut sim);
-            let now: Vec<DVec3> = common::grains(&mut sim).iter().map(|g| g.position).collect();
+            let now: Vec<DVec3> = common::grains(&mut sim)
+                .iter()
+                .map(|g| g.position)
+                .collect();
             wrapped += now
                 .iter()
                 .zip(&previous)
@@ -150,7 +166,8 @@ fn a_frictional_gas_in_a_periodic_box_conserves_momentum_and_energy() {
 }
 
 fn error_of(text: &str) -> talus::scene::SceneError {
-    match talus::scene::parse("bad.ron", text).and_then(|s| s.build(&talus::registry()).map(|_| ())) {
+    match talus::scene::parse("bad.ron", text).and_then(|s| s.build(&talus::registry()).map(|_| ()))
+    {
         Err(e) => e,
         Ok(()) => panic!("accepted:\n{text}"),
     }
@@ -164,7 +181,10 @@ fn bad_periodic_boxes_are_scene_errors() {
     // One grain of radius 1 mm in a box 3.5 mm long: it would touch its own image.
     let tiny = pair_scene(0.001, 0.05)
         .replace("x: (0.0, 0.2)", "x: (0.0, 0.0035)")
-        .replace("(position: (5e-2, 0.0, 0.0), radius: 0.01, velocity: (-0.5, 0.0, 0.0)),", "")
+        .replace(
+            "(position: (5e-2, 0.0, 0.0), radius: 0.01, velocity: (-0.5, 0.0, 0.0)),",
+            "",
+        )
         .replace("radius: 0.01", "radius: 0.001");
     let e = error_of(&tiny);
     assert_eq!(e.field, "periodic.x", "{e}");
@@ -172,5 +192,8 @@ fn bad_periodic_boxes_are_scene_errors() {
     let inverted = GAS.replace("y: (0.0, 0.02)", "y: (0.02, 0.0)");
     assert_eq!(error_of(&inverted).field, "periodic.y");
     let unknown = GAS.replace("z: (0.0, 0.02)", "w: (0.0, 0.02)");
-    assert!(error_of(&unknown).expected.contains("x"), "lists the fields");
+    assert!(
+        error_of(&unknown).expected.contains("x"),
+        "lists the fields"
+    );
 }

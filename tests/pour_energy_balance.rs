@@ -64,11 +64,17 @@ fn pour_energy_balance_error_is_the_integrators_and_second_order() {
         let report = run(&path, &format!("balance-{spc}"));
         physical.push(worst_drift(&report, |s| s.energy_balance));
         let bookkeeping = worst_drift(&report, |s| s.bookkeeping_balance);
-        assert!(bookkeeping < 1e-6, "bookkeeping drift {bookkeeping:e} at {spc} steps per collision");
+        assert!(
+            bookkeeping < 1e-6,
+            "bookkeeping drift {bookkeeping:e} at {spc} steps per collision"
+        );
     }
     eprintln!("physical balance drift at 50 and 100 steps per collision: {physical:?}");
     assert!(physical[0] < 1e-3, "{physical:?}");
-    assert!(physical[0] / physical[1] > 3.0, "not second order: {physical:?}");
+    assert!(
+        physical[0] / physical[1] > 3.0,
+        "not second order: {physical:?}"
+    );
 }
 
 /// The tolerance on the default pour scene: kinetic + elastic + dissipated −
@@ -86,5 +92,8 @@ fn pour_scene_energy_balance_closes_to_1e_minus_6() {
         "energy balance drifted by {bookkeeping:e} of the gravity work"
     );
     // The integration error itself stays small at the default step.
-    assert!(physical < 1e-3, "integration error {physical:e} of the gravity work");
+    assert!(
+        physical < 1e-3,
+        "integration error {physical:e} of the gravity work"
+    );
 }

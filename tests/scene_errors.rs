@@ -114,7 +114,10 @@ fn rotation_off_with_a_law_that_torques_grains() {
 
 #[test]
 fn unknown_rolling_part() {
-    let text = GOOD.replace("restitution: 0.5))", "restitution: 0.5, rolling: \"sticky\"))");
+    let text = GOOD.replace(
+        "restitution: 0.5))",
+        "restitution: 0.5, rolling: \"sticky\"))",
+    );
     let e = error_of(&text);
     assert_eq!(e.field, "materials[0].contact.rolling", "{e}");
     assert!(e.expected.contains("sticky"), "{e}");
@@ -142,5 +145,9 @@ fn two_walls_with_one_name() {
     );
     let e = error_of(&text);
     assert_eq!(e.field, "walls[1].name", "{e}");
-    assert_eq!(e.line, line_col_of(&text, "Plane(name: \"floor\", point: (0.0, 0.0, 1.0)").0, "{e}");
+    assert_eq!(
+        e.line,
+        line_col_of(&text, "Plane(name: \"floor\", point: (0.0, 0.0, 1.0)").0,
+        "{e}"
+    );
 }

@@ -29,10 +29,17 @@ fn a_servo_lid_holds_the_target_pressure() {
 )"#
     );
     let (mut sim, steps) = common::build(&text);
-    assert!(sim.plan.stages.iter().any(|(_, s)| s.iter().any(|n| n == "servo_walls")));
+    assert!(
+        sim.plan
+            .stages
+            .iter()
+            .any(|(_, s)| s.iter().any(|n| n == "servo_walls"))
+    );
     sim.run_steps(steps).unwrap();
     let sample = ReportSample::take(&sim.world);
-    let mut q = sim.world.query::<(&talus::core::prelude::Wall, &talus::core::prelude::WallLoad)>();
+    let mut q = sim
+        .world
+        .query::<(&talus::core::prelude::Wall, &talus::core::prelude::WallLoad)>();
     let (lid, load) = q.iter(&sim.world).find(|(w, _)| w.name == "lid").unwrap();
     let pushed = -load.0.dot(lid.normal);
     let target = PRESSURE * 1e-4;
@@ -44,5 +51,8 @@ fn a_servo_lid_holds_the_target_pressure() {
         sample.kinetic()
     );
     assert!((pushed - target).abs() < 0.01 * target, "lid load {pushed}");
-    assert!((-sigma_zz - PRESSURE).abs() < 0.01 * PRESSURE, "σ_zz {sigma_zz}");
+    assert!(
+        (-sigma_zz - PRESSURE).abs() < 0.01 * PRESSURE,
+        "σ_zz {sigma_zz}"
+    );
 }

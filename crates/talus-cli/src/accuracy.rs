@@ -188,10 +188,16 @@ pub fn load_study(path: &Path) -> Result<StudySpec, StudyError> {
             ))
         })?;
     if spec.settings.is_empty() {
-        return Err(StudyError::Study(format!("{}: field `settings`: expected at least one setting", path.display())));
+        return Err(StudyError::Study(format!(
+            "{}: field `settings`: expected at least one setting",
+            path.display()
+        )));
     }
     if !(spec.tolerance > 0.0 && spec.tolerance.is_finite()) {
-        return Err(StudyError::Study(format!("{}: field `tolerance`: expected a positive relative error", path.display())));
+        return Err(StudyError::Study(format!(
+            "{}: field `tolerance`: expected a positive relative error",
+            path.display()
+        )));
     }
     Ok(spec)
 }
@@ -224,7 +230,8 @@ pub fn run_study(
     for r in &mut rows {
         r.error = (r.value - reference).abs() / reference.abs().max(f64::MIN_POSITIVE);
     }
-    let is_reference = |r: &StudyRow| matches!(spec.reference, Reference::Finest) && r.value == reference;
+    let is_reference =
+        |r: &StudyRow| matches!(spec.reference, Reference::Finest) && r.value == reference;
     let fastest_within_tolerance = rows
         .iter()
         .enumerate()
@@ -293,7 +300,14 @@ fn run_setting(
     let mut sim = built.builder.build();
     let dt = sim.config().dt;
     let started = Instant::now();
-    let fail = |b: BlowUp| StudyError::Run(format!("{}: step {}: {}", setting.label(), b.step, b.reason));
+    let fail = |b: BlowUp| {
+        StudyError::Run(format!(
+            "{}: step {}: {}",
+            setting.label(),
+            b.step,
+            b.reason
+        ))
+    };
     sim.prime().map_err(fail)?;
     let value = match quantity {
         Quantity::Restitution { grains } => {
@@ -353,7 +367,11 @@ fn run_setting(
             let sample = crate::ReportSample::take(&sim.world);
             let json = serde_json::to_value(&sample).expect("a sample serialises");
             // A JSON pointer (`/stress/regions/0/solid_fraction`) reaches nested fields.
-            let value = if field.starts_with('/') { json.pointer(field) } else { json.get(field) };
+            let value = if field.starts_with('/') {
+                json.pointer(field)
+            } else {
+                json.get(field)
+            };
             value.and_then(|v| v.as_f64()).ok_or_else(|| {
                 StudyError::Study(format!(
                     "field `quantity.field`: expected a numeric field of a report sample (translational_kinetic, elastic, dissipated_total, ...) or a JSON pointer to one (/stress/regions/0/solid_fraction), found `{field}`"
@@ -372,7 +390,10 @@ fn run_setting(
 }
 
 /// The entities of two grains given by their index in the scene's grain order.
-fn grain_entities(world: &mut World, (i, j): (usize, usize)) -> Result<(Entity, Entity), StudyError> {
+fn grain_entities(
+    world: &mut World,
+    (i, j): (usize, usize),
+) -> Result<(Entity, Entity), StudyError> {
     let mut q = world.query_filtered::<Entity, With<Grain>>();
     let all: Vec<Entity> = q.iter(world).collect();
     match (all.get(i), all.get(j)) {
@@ -394,13 +415,21 @@ fn relative(world: &World, a: Entity, b: Entity) -> (DVec3, DVec3) {
 }
 
 fn write_outputs(result: &mut StudyResult, spec: &StudySpec, out: &Path) -> Result<(), StudyError> {
-    let io = |p: &Path, e: std::io::Error| StudyError::Run(format!("cannot write {}: {e}", p.display()));
+    let io =
+        |p: &Path, e: std::io::Error| StudyError::Run(format!("cannot write {}: {e}", p.display()));
     let mut md = String::new();
-    let _ = writeln!(md, "| setting | dt (s) | steps | value | relative error | wall clock (s) |");
+    let _ = writeln!(
+        md,
+        "| setting | dt (s) | steps | value | relative error | wall clock (s) |"
+    );
     let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|");
     let mut csv = String::from("setting,dt,steps,value,relative_error,seconds\n");
     for (k, r) in result.rows.iter().enumerate() {
-        let mark = if Some(k) == result.fastest_within_tolerance { " **(fastest within tolerance)**" } else { "" };
+        let mark = if Some(k) == result.fastest_within_tolerance {
+            " **(fastest within tolerance)**"
+        } else {
+            ""
+        };
         let _ = writeln!(
             md,
             "| {}{mark} | {:.4e} | {} | {:.8e} | {:.3e} | {:.3} |",
@@ -432,7 +461,10 @@ fn write_outputs(result: &mut StudyResult, spec: &StudySpec, out: &Path) -> Resu
         result.reference,
         result.tolerance,
         match result.fastest_within_tolerance {
-            Some(k) => format!("fastest setting within it: {}", result.rows[k].setting.label()),
+            Some(k) => format!(
+                "fastest setting within it: {}",
+                result.rows[k].setting.label()
+            ),
             None => "no setting reaches it".into(),
         }
     );

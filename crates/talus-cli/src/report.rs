@@ -71,7 +71,12 @@ impl ReportSample {
         let dissipation_power: BTreeMap<String, f64> = names
             .iter()
             .enumerate()
-            .map(|(i, n)| (n.clone(), e.dissipation_power.get(i).copied().unwrap_or(0.0)))
+            .map(|(i, n)| {
+                (
+                    n.clone(),
+                    e.dissipation_power.get(i).copied().unwrap_or(0.0),
+                )
+            })
             .collect();
         let balance = e.translational_kinetic
             + e.rotational_kinetic

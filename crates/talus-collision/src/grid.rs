@@ -72,8 +72,7 @@ impl CellGrid {
             hi = DVec3::ZERO;
         }
         // Edge ≥ 2 R_max + r_c so that touching grains are never more than one cell apart.
-        let edge =
-            (2.0 * s.max_radius + self.interaction_range + margin).max(1e-12) * (1.0 + 1e-9);
+        let edge = (2.0 * s.max_radius + self.interaction_range + margin).max(1e-12) * (1.0 + 1e-9);
         self.periodic = s.periodic.map_or([false; 3], |b| b.axes);
         if let Some(b) = &s.periodic {
             for a in 0..3 {
@@ -164,8 +163,14 @@ impl CellGrid {
         let k = c[axis];
         if self.periodic[axis] {
             match n {
-                1 => Neighbours { cells: [0, 0, 0], len: 1 },
-                2 => Neighbours { cells: [0, 1, 0], len: 2 },
+                1 => Neighbours {
+                    cells: [0, 0, 0],
+                    len: 1,
+                },
+                2 => Neighbours {
+                    cells: [0, 1, 0],
+                    len: 2,
+                },
                 _ => Neighbours {
                     cells: [(k + n - 1) % n, k, (k + 1) % n],
                     len: 3,

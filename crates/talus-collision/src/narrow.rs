@@ -5,12 +5,13 @@
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 use smallvec::SmallVec;
-use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind, systems::ContactLawTable};
+use talus_contact::{
+    Contact, ContactForce, ContactGeometry, ContactKind, systems::ContactLawTable,
+};
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, NeighbourList};
-
 
 /// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]

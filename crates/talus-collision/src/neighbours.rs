@@ -77,34 +77,37 @@ pub fn update_neighbour_list(
         list.chunks.resize_with(chunks, Vec::new);
     }
     list.chunks.truncate(chunks);
-    list.chunks.par_iter_mut().enumerate().for_each(|(chunk, out)| {
-        out.clear();
-        for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
-            let p = s.position[i];
-            let r = s.radius[i];
-            let c = grid.coords(p);
-            let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
-            for &cz in zs.cells() {
-                for &cy in ys.cells() {
-                    for &cx in xs.cells() {
-                        for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
-                            if (j as usize) <= i {
-                                continue;
-                            }
-                            let reach = r + s.radius[j as usize] + range + skin;
-                            let d = s.separation(p, s.position[j as usize]);
-                            if d.length_squared() < reach * reach {
-                                out.push((i as u32, j));
+    list.chunks
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(chunk, out)| {
+            out.clear();
+            for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
+                let p = s.position[i];
+                let r = s.radius[i];
+                let c = grid.coords(p);
+                let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
+                for &cz in zs.cells() {
+                    for &cy in ys.cells() {
+                        for &cx in xs.cells() {
+                            for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
+                                if (j as usize) <= i {
+                                    continue;
+                                }
+                                let reach = r + s.radius[j as usize] + range + skin;
+                                let d = s.separation(p, s.position[j as usize]);
+                                if d.length_squared() < reach * reach {
+                                    out.push((i as u32, j));
+                                }
                             }
                         }
                     }
                 }
             }
-        }
-        // Within a chunk, keep the pairs of each grain in increasing partner order, so
-        // that the touching pairs come out in a fixed order.
-        out.sort_unstable();
-    });
+            // Within a chunk, keep the pairs of each grain in increasing partner order, so
+            // that the touching pairs come out in a fixed order.
+            out.sort_unstable();
+        });
     list.reference.clear();
     list.reference.extend_from_slice(&s.position);
     list.entities.clear();

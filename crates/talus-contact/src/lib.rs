@@ -17,8 +17,8 @@ pub mod systems;
 
 pub use components::*;
 pub use compose::{
-    Absent, ComposedHistory, ComposedLaw, ComposedParams, Composed, ContactState, Needs, NoCohesion, NoDamping,
-    NoRolling, NoTwisting, SubModel, SubModelKind, is_two_dimensional,
+    Absent, Composed, ComposedHistory, ComposedLaw, ComposedParams, ContactState, Needs,
+    NoCohesion, NoDamping, NoRolling, NoTwisting, SubModel, SubModelKind, is_two_dimensional,
 };
 pub use kinematics::ContactKinematics;
 pub use law::*;

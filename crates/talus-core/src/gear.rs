@@ -16,7 +16,14 @@ use crate::resources::{Clock, SimConfig};
 
 /// Corrector coefficients of the six-value Gear scheme for second-order equations
 /// (Gear 1971; Allen & Tildesley table E.1), for r, dt r', dt²/2 r'', ..., dt⁵/120 r⁽⁵⁾.
-const POSITION_CORRECTOR: [f64; 6] = [3.0 / 16.0, 251.0 / 360.0, 1.0, 11.0 / 18.0, 1.0 / 6.0, 1.0 / 60.0];
+const POSITION_CORRECTOR: [f64; 6] = [
+    3.0 / 16.0,
+    251.0 / 360.0,
+    1.0,
+    11.0 / 18.0,
+    1.0 / 6.0,
+    1.0 / 60.0,
+];
 
 /// Corrector coefficients of the four-value Gear scheme for first-order equations, for
 /// ω, dt ω', dt²/2 ω'', dt³/6 ω'''.
@@ -41,7 +48,15 @@ pub fn gear_predict(
     clock: Res<Clock>,
     mut history: ResMut<GearHistory>,
     mut grains: Query<
-        (&mut Position, &mut Velocity, &mut AngularVelocity, &Force, &Torque, &Mass, &MomentOfInertia),
+        (
+            &mut Position,
+            &mut Velocity,
+            &mut AngularVelocity,
+            &Force,
+            &Torque,
+            &Mass,
+            &MomentOfInertia,
+        ),
         (With<Grain>, Without<Frozen>),
     >,
 ) {
@@ -55,8 +70,17 @@ pub fn gear_predict(
         h.position.clear();
         h.spin.clear();
         for (_, _, _, f, t, m, i) in grains.iter() {
-            h.position.push([f.0 * (0.5 * dt * dt / m.0), DVec3::ZERO, DVec3::ZERO, DVec3::ZERO]);
-            let spin_rate = if config.rotation { t.0 * (dt / i.0) } else { DVec3::ZERO };
+            h.position.push([
+                f.0 * (0.5 * dt * dt / m.0),
+                DVec3::ZERO,
+                DVec3::ZERO,
+                DVec3::ZERO,
+            ]);
+            let spin_rate = if config.rotation {
+                t.0 * (dt / i.0)
+            } else {
+                DVec3::ZERO
+            };
             h.spin.push([spin_rate, DVec3::ZERO, DVec3::ZERO]);
         }
     }
@@ -91,7 +115,15 @@ pub fn gear_correct(
     mut history: ResMut<GearHistory>,
     mut ledger: ResMut<EnergyLedger>,
     mut grains: Query<
-        (&mut Position, &mut Velocity, &mut AngularVelocity, &Force, &Torque, &Mass, &MomentOfInertia),
+        (
+            &mut Position,
+            &mut Velocity,
+            &mut AngularVelocity,
+            &Force,
+            &Torque,
+            &Mass,
+            &MomentOfInertia,
+        ),
         (With<Grain>, Without<Frozen>),
     >,
 ) {

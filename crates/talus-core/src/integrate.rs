@@ -26,7 +26,10 @@ pub fn kick_drift_translation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
     mut ledger: ResMut<EnergyLedger>,
-    mut grains: Query<(&mut Position, &mut Velocity, &Force, &Mass), (With<Grain>, Without<Frozen>)>,
+    mut grains: Query<
+        (&mut Position, &mut Velocity, &Force, &Mass),
+        (With<Grain>, Without<Frozen>),
+    >,
 ) {
     let dt = clock.pass_dt;
     if dt == 0.0 {
@@ -76,7 +79,10 @@ pub fn kick_drift_translation(
 pub fn first_kick_rotation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
-    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), (With<Grain>, Without<Frozen>)>,
+    grains: Query<
+        (&mut AngularVelocity, &Torque, &MomentOfInertia),
+        (With<Grain>, Without<Frozen>),
+    >,
 ) {
     let kick = config.integrator.kick_before_drift() * clock.pass_dt;
     rotation_kick(kick, grains);
@@ -86,7 +92,10 @@ pub fn first_kick_rotation(
 pub fn second_kick_rotation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
-    grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), (With<Grain>, Without<Frozen>)>,
+    grains: Query<
+        (&mut AngularVelocity, &Torque, &MomentOfInertia),
+        (With<Grain>, Without<Frozen>),
+    >,
 ) {
     let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
     rotation_kick(kick, grains);
@@ -94,7 +103,10 @@ pub fn second_kick_rotation(
 
 fn rotation_kick(
     kick: f64,
-    mut grains: Query<(&mut AngularVelocity, &Torque, &MomentOfInertia), (With<Grain>, Without<Frozen>)>,
+    mut grains: Query<
+        (&mut AngularVelocity, &Torque, &MomentOfInertia),
+        (With<Grain>, Without<Frozen>),
+    >,
 ) {
     if kick == 0.0 {
         return;
@@ -154,7 +166,8 @@ pub fn servo_walls(mut walls: Query<(&mut Wall, &WallLoad, &Servo)>) {
     for (mut wall, load, servo) in &mut walls {
         let n = wall.normal;
         let pushed = -load.0.dot(n);
-        let speed = (servo.gain * (servo.target_load - pushed)).clamp(-servo.max_speed, servo.max_speed);
+        let speed =
+            (servo.gain * (servo.target_load - pushed)).clamp(-servo.max_speed, servo.max_speed);
         wall.velocity = n * speed;
     }
 }
@@ -201,8 +214,16 @@ pub fn kinetic_energy(
     let a = config.integrator.kick_before_drift();
     // Gear is not a leapfrog: no staggering term (its energy error shows in the balance).
     let leapfrog = config.integrator != crate::resources::Integrator::Gear;
-    let linear = if leapfrog { 0.5 * dt * (2.0 * a - 1.0) } else { 0.0 };
-    let quadratic = if leapfrog { 0.5 * a * (1.0 - a) * dt * dt } else { 0.0 };
+    let linear = if leapfrog {
+        0.5 * dt * (2.0 * a - 1.0)
+    } else {
+        0.0
+    };
+    let quadratic = if leapfrog {
+        0.5 * a * (1.0 - a) * dt * dt
+    } else {
+        0.0
+    };
     // Without rotation the torques are computed but never integrated.
     let rotation = config.rotation;
     let mut translational = 0.0;

@@ -157,8 +157,14 @@ impl SimBuilder {
         }
         let gear = integrator == crate::resources::Integrator::Gear;
         if gear {
-            builder.world.insert_resource(crate::gear::GearHistory::default());
-            builder.add_system(Stage::IntegratePositions, "gear_predict", crate::gear::gear_predict);
+            builder
+                .world
+                .insert_resource(crate::gear::GearHistory::default());
+            builder.add_system(
+                Stage::IntegratePositions,
+                "gear_predict",
+                crate::gear::gear_predict,
+            );
         } else {
             builder.add_system(
                 Stage::IntegratePositions,
@@ -187,7 +193,11 @@ impl SimBuilder {
             builder.add_system(Stage::BodyForces, "gravity", integrate::gravity);
         }
         if gear {
-            builder.add_system(Stage::IntegrateVelocities, "gear_correct", crate::gear::gear_correct);
+            builder.add_system(
+                Stage::IntegrateVelocities,
+                "gear_correct",
+                crate::gear::gear_correct,
+            );
         } else {
             builder.add_system(
                 Stage::IntegrateVelocities,

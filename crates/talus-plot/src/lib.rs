@@ -59,17 +59,29 @@ pub struct Series {
 impl Series {
     /// A series drawn as a line.
     pub fn line(name: impl Into<String>, points: Vec<(f64, f64)>) -> Self {
-        Self { name: name.into(), points, mark: Mark::Line }
+        Self {
+            name: name.into(),
+            points,
+            mark: Mark::Line,
+        }
     }
 
     /// A series drawn as markers.
     pub fn points(name: impl Into<String>, points: Vec<(f64, f64)>) -> Self {
-        Self { name: name.into(), points, mark: Mark::Points }
+        Self {
+            name: name.into(),
+            points,
+            mark: Mark::Points,
+        }
     }
 
     /// A series drawn as a line with markers.
     pub fn line_and_points(name: impl Into<String>, points: Vec<(f64, f64)>) -> Self {
-        Self { name: name.into(), points, mark: Mark::LineAndPoints }
+        Self {
+            name: name.into(),
+            points,
+            mark: Mark::LineAndPoints,
+        }
     }
 }
 
@@ -85,12 +97,18 @@ pub struct Axis {
 impl Axis {
     /// A linear axis.
     pub fn linear(label: impl Into<String>) -> Self {
-        Self { label: label.into(), log: false }
+        Self {
+            label: label.into(),
+            log: false,
+        }
     }
 
     /// A logarithmic axis.
     pub fn log(label: impl Into<String>) -> Self {
-        Self { label: label.into(), log: true }
+        Self {
+            label: label.into(),
+            log: true,
+        }
     }
 }
 
@@ -112,7 +130,13 @@ pub struct Chart {
 impl Chart {
     /// A 720 × 480 chart.
     pub fn new(title: impl Into<String>, x: Axis, y: Axis) -> Self {
-        Self { title: title.into(), x, y, series: Vec::new(), size: (720, 480) }
+        Self {
+            title: title.into(),
+            x,
+            y,
+            series: Vec::new(),
+            size: (720, 480),
+        }
     }
 
     /// Adds a series.
@@ -151,9 +175,17 @@ fn range(values: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f64)> {
         return None;
     }
     Some(if log {
-        if lo == hi { (lo / 2.0, hi * 2.0) } else { (lo / 1.3, hi * 1.3) }
+        if lo == hi {
+            (lo / 2.0, hi * 2.0)
+        } else {
+            (lo / 1.3, hi * 1.3)
+        }
     } else {
-        let pad = if lo == hi { lo.abs().max(1.0) * 0.1 } else { 0.05 * (hi - lo) };
+        let pad = if lo == hi {
+            lo.abs().max(1.0) * 0.1
+        } else {
+            0.05 * (hi - lo)
+        };
         (lo - pad, hi + pad)
     })
 }
@@ -171,7 +203,10 @@ pub fn write_svg(chart: &Chart, path: &Path) -> Result<(), PlotError> {
             .iter()
             .copied()
             .filter(|(x, y)| {
-                x.is_finite() && y.is_finite() && (!chart.x.log || *x > 0.0) && (!chart.y.log || *y > 0.0)
+                x.is_finite()
+                    && y.is_finite()
+                    && (!chart.x.log || *x > 0.0)
+                    && (!chart.y.log || *y > 0.0)
             })
             .collect()
     };
@@ -187,7 +222,13 @@ pub fn write_svg(chart: &Chart, path: &Path) -> Result<(), PlotError> {
         (false, false) => draw(&root, chart, xr.0..xr.1, yr.0..yr.1, &visible),
         (true, false) => draw(&root, chart, (xr.0..xr.1).log_scale(), yr.0..yr.1, &visible),
         (false, true) => draw(&root, chart, xr.0..xr.1, (yr.0..yr.1).log_scale(), &visible),
-        (true, true) => draw(&root, chart, (xr.0..xr.1).log_scale(), (yr.0..yr.1).log_scale(), &visible),
+        (true, true) => draw(
+            &root,
+            chart,
+            (xr.0..xr.1).log_scale(),
+            (yr.0..yr.1).log_scale(),
+            &visible,
+        ),
     };
     result.map_err(fail)?;
     root.present().map_err(|e| fail(e.to_string()))
@@ -223,10 +264,15 @@ where
         let colour = PALETTE[k % PALETTE.len()];
         let points = visible(s);
         if matches!(s.mark, Mark::Line | Mark::LineAndPoints) {
-            c.draw_series(LineSeries::new(points.iter().copied(), colour.stroke_width(2)))
-                .map_err(|e| e.to_string())?
-                .label(s.name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+            c.draw_series(LineSeries::new(
+                points.iter().copied(),
+                colour.stroke_width(2),
+            ))
+            .map_err(|e| e.to_string())?
+            .label(s.name.as_str())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+            });
         }
         if matches!(s.mark, Mark::Points | Mark::LineAndPoints) {
             let series = c
@@ -256,11 +302,25 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("talus-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         for (xlog, ylog) in [(false, false), (true, true), (true, false), (false, true)] {
-            let x = if xlog { Axis::log("x (1)") } else { Axis::linear("x (1)") };
-            let y = if ylog { Axis::log("y (1)") } else { Axis::linear("y (1)") };
+            let x = if xlog {
+                Axis::log("x (1)")
+            } else {
+                Axis::linear("x (1)")
+            };
+            let y = if ylog {
+                Axis::log("y (1)")
+            } else {
+                Axis::linear("y (1)")
+            };
             let chart = Chart::new("a chart", x, y)
-                .with(Series::line("x²", (1..50).map(|i| (i as f64, (i * i) as f64)).collect()))
-                .with(Series::points("x", (1..50).map(|i| (i as f64, i as f64)).collect()));
+                .with(Series::line(
+                    "x²",
+                    (1..50).map(|i| (i as f64, (i * i) as f64)).collect(),
+                ))
+                .with(Series::points(
+                    "x",
+                    (1..50).map(|i| (i as f64, i as f64)).collect(),
+                ));
             let path = dir.join(format!("c{xlog}{ylog}.svg"));
             write_svg(&chart, &path).unwrap();
             let svg = std::fs::read_to_string(&path).unwrap();
@@ -269,6 +329,9 @@ mod tests {
         }
         let empty = Chart::new("empty", Axis::log("x"), Axis::linear("y"))
             .with(Series::line("none", vec![(-1.0, 1.0)]));
-        assert!(matches!(write_svg(&empty, &dir.join("e.svg")), Err(PlotError::Empty(_))));
+        assert!(matches!(
+            write_svg(&empty, &dir.join("e.svg")),
+            Err(PlotError::Empty(_))
+        ));
     }
 }

@@ -240,7 +240,10 @@ impl Scene {
                 &p.contact,
                 &format!("pairs[{k}].contact"),
             )?;
-            if let Some(&(_, _, j)) = overrides.iter().find(|o| (o.0, o.1) == (a.min(b), a.max(b))) {
+            if let Some(&(_, _, j)) = overrides
+                .iter()
+                .find(|o| (o.0, o.1) == (a.min(b), a.max(b)))
+            {
                 return Err(cx.err(
                     &format!("pairs[{k}].materials"),
                     format!("a material pair not already given (pairs[{j}] sets the same pair)"),
@@ -266,7 +269,9 @@ impl Scene {
                     if let Some(sv) = servo {
                         let positive = |x: f64| x.is_finite() && x > 0.0;
                         if !(sv.pressure.is_finite() && sv.pressure >= 0.0) {
-                            return Err(cx.err(&field("servo.pressure"), "a non-negative pressure in Pa"));
+                            return Err(
+                                cx.err(&field("servo.pressure"), "a non-negative pressure in Pa")
+                            );
                         }
                         if !positive(sv.area) {
                             return Err(cx.err(&field("servo.area"), "a positive area in m²"));
@@ -275,16 +280,24 @@ impl Scene {
                             return Err(cx.err(&field("servo.gain"), "a positive gain in m/(s N)"));
                         }
                         if sv.max_speed.is_some_and(|v| !positive(v)) {
-                            return Err(cx.err(&field("servo.max_speed"), "a positive speed in m/s"));
+                            return Err(
+                                cx.err(&field("servo.max_speed"), "a positive speed in m/s")
+                            );
                         }
                         if *velocity != [0.0; 3] {
-                            return Err(cx.err(&field("velocity"), "no velocity on a servo wall (the servo sets it)"));
+                            return Err(cx.err(
+                                &field("velocity"),
+                                "no velocity on a servo wall (the servo sets it)",
+                            ));
                         }
-                        servos.push((walls.len(), Servo {
-                            target_load: sv.pressure * sv.area,
-                            gain: sv.gain,
-                            max_speed: sv.max_speed.unwrap_or(f64::INFINITY),
-                        }));
+                        servos.push((
+                            walls.len(),
+                            Servo {
+                                target_load: sv.pressure * sv.area,
+                                gain: sv.gain,
+                                max_speed: sv.max_speed.unwrap_or(f64::INFINITY),
+                            },
+                        ));
                     }
                     let mat = material_id(material, &field("material"))?;
                     let n = vec3(*normal);
@@ -380,7 +393,10 @@ impl Scene {
             if let Some((j, _)) = walls[..i].iter().find(|(_, o)| o.wall.name == w.wall.name) {
                 return Err(cx.err(
                     &format!("walls[{k}].name"),
-                    format!("a wall name not already used (`{}` is also walls[{j}])", w.wall.name),
+                    format!(
+                        "a wall name not already used (`{}` is also walls[{j}])",
+                        w.wall.name
+                    ),
                 ));
             }
         }
@@ -434,7 +450,11 @@ impl Scene {
                     }
                     material
                 }
-                GrainSource::LammpsData { file, types, replicate } => {
+                GrainSource::LammpsData {
+                    file,
+                    types,
+                    replicate,
+                } => {
                     let atoms = self.read_lammps(&cx, k, file, types, two_d, &material_id)?;
                     let (nx, ny, nz) = replicate.unwrap_or((1, 1, 1));
                     if nx == 0 || ny == 0 || nz == 0 || (two_d && nz != 1) {
@@ -446,9 +466,20 @@ impl Scene {
                     if (nx, ny, nz) == (1, 1, 1) {
                         grains.extend(atoms);
                     } else {
-                        let path = self.path.parent().map_or_else(|| Path::new(file).to_path_buf(), |d| d.join(file));
+                        let path = self
+                            .path
+                            .parent()
+                            .map_or_else(|| Path::new(file).to_path_buf(), |d| d.join(file));
                         let lengths = crate::lammps::box_lengths(&path).map_err(|e| {
-                            cx.err(&field("file"), format!("a valid LAMMPS data file: {}:{}: {}", path.display(), e.line, e.message))
+                            cx.err(
+                                &field("file"),
+                                format!(
+                                    "a valid LAMMPS data file: {}:{}: {}",
+                                    path.display(),
+                                    e.line,
+                                    e.message
+                                ),
+                            )
                         })?;
                         let mut shift = DVec3::ZERO;
                         for (a, n) in [nx, ny, nz].into_iter().enumerate() {
@@ -461,8 +492,15 @@ impl Scene {
                         for iz in 0..nz {
                             for iy in 0..ny {
                                 for ix in 0..nx {
-                                    let offset = DVec3::new(ix as f64 * shift.x, iy as f64 * shift.y, iz as f64 * shift.z);
-                                    grains.extend(atoms.iter().map(|g| GrainInit { position: g.position + offset, ..*g }));
+                                    let offset = DVec3::new(
+                                        ix as f64 * shift.x,
+                                        iy as f64 * shift.y,
+                                        iz as f64 * shift.z,
+                                    );
+                                    grains.extend(atoms.iter().map(|g| GrainInit {
+                                        position: g.position + offset,
+                                        ..*g
+                                    }));
                                 }
                             }
                         }
@@ -690,9 +728,8 @@ impl Scene {
             }
             (None, Some((ts, label))) => {
                 let dt = ts.contact_time / f.steps_per_collision;
-                let (limit, limit_label) = stability
-                    .clone()
-                    .unwrap_or((f64::INFINITY, String::new()));
+                let (limit, limit_label) =
+                    stability.clone().unwrap_or((f64::INFINITY, String::new()));
                 // A part stiffer than the normal spring (a rolling or tangential spring)
                 // can make the stability bound the tighter constraint; keep a margin of
                 // STABILITY_SAFETY below it.
@@ -746,12 +783,11 @@ impl Scene {
         for install in &installs {
             builder.add_plugin(install);
         }
-        builder.add_plugin(&CollisionPlugin {
-            interaction_range,
-        });
+        builder.add_plugin(&CollisionPlugin { interaction_range });
         if let Some(b) = periodic {
             // The interaction range is known only now: a pair must not reach two images.
-            let reach = 2.0 * grains.iter().map(|g| g.radius).fold(0.0, f64::max) + interaction_range;
+            let reach =
+                2.0 * grains.iter().map(|g| g.radius).fold(0.0, f64::max) + interaction_range;
             for a in 0..3 {
                 if b.axes[a] && b.length()[a] <= 2.0 * reach {
                     return Err(cx.err(
@@ -764,7 +800,10 @@ impl Scene {
                 }
             }
             builder.periodic(b);
-            let names: Vec<&str> = (0..3).filter(|&a| b.axes[a]).map(|a| ["x", "y", "z"][a]).collect();
+            let names: Vec<&str> = (0..3)
+                .filter(|&a| b.axes[a])
+                .map(|a| ["x", "y", "z"][a])
+                .collect();
             builder.note(format!("periodic along {}", names.join(", ")));
         }
         // Stress sampling only when the scene asks for it: otherwise no system is added.
@@ -815,7 +854,8 @@ impl Scene {
             (true, _) => "rotation: integrated (a contact law can torque grains)".to_string(),
             (false, Some(false)) => "rotation: not integrated (the scene turns it off)".to_string(),
             (false, _) => {
-                "rotation: not integrated (no contact law in this scene can torque a grain)".to_string()
+                "rotation: not integrated (no contact law in this scene can torque a grain)"
+                    .to_string()
             }
         });
         builder.note(format!(
@@ -824,7 +864,11 @@ impl Scene {
             walls.len()
         ));
         if !servos.is_empty() {
-            builder.add_system(Stage::Prepare, "servo_walls", talus_core::integrate::servo_walls);
+            builder.add_system(
+                Stage::Prepare,
+                "servo_walls",
+                talus_core::integrate::servo_walls,
+            );
         }
         for (k, (_, w)) in walls.into_iter().enumerate() {
             let mut entity = builder.world.spawn(w);
@@ -852,9 +896,13 @@ impl Scene {
             .with_angular_velocity(g.angular_velocity)
         };
         let frozen_count = grains.iter().filter(|g| g.frozen).count();
-        builder
-            .world
-            .spawn_batch(grains.iter().filter(|g| !g.frozen).map(bundle).collect::<Vec<_>>());
+        builder.world.spawn_batch(
+            grains
+                .iter()
+                .filter(|g| !g.frozen)
+                .map(bundle)
+                .collect::<Vec<_>>(),
+        );
         if frozen_count > 0 {
             builder.world.spawn_batch(
                 grains
@@ -863,7 +911,9 @@ impl Scene {
                     .map(|g| (bundle(g), Frozen))
                     .collect::<Vec<_>>(),
             );
-            builder.note(format!("frozen grains: {frozen_count} (in contacts, never moved)"));
+            builder.note(format!(
+                "frozen grains: {frozen_count} (in contacts, never moved)"
+            ));
         }
         Ok(BuiltScene {
             builder,
@@ -911,20 +961,31 @@ fn check_contact(
             let listed = if choices.is_empty() {
                 format!("nothing: `{}` has no {word} parts", c.law)
             } else {
-                format!("one of {}", choices.iter().map(|p| format!("`{p}`")).collect::<Vec<_>>().join(", "))
+                format!(
+                    "one of {}",
+                    choices
+                        .iter()
+                        .map(|p| format!("`{p}`"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
             };
             cx.err(
                 &format!("{field}.{word}"),
                 format!(
                     "a {word} part registered with `{}`: {listed}{}",
                     c.law,
-                    given.as_ref().map(|g| format!(", found `{g}`")).unwrap_or_default()
+                    given
+                        .as_ref()
+                        .map(|g| format!(", found `{g}`"))
+                        .unwrap_or_default()
                 ),
             )
         };
-        let rolling_known = c.rolling.as_deref().is_none_or(|r| {
-            registry.part_choices(&c.law, false).contains(&r)
-        });
+        let rolling_known = c
+            .rolling
+            .as_deref()
+            .is_none_or(|r| registry.part_choices(&c.law, false).contains(&r));
         return Err(if rolling_known {
             part_error("twisting", true, &c.twisting)
         } else {
@@ -1074,14 +1135,20 @@ impl Scene {
     ) -> Result<Vec<GrainInit>, SceneError> {
         let field = |s: &str| format!("grains[{k}].{s}");
         if types.is_empty() {
-            return Err(cx.err(&field("types"), "at least one (type: n, material: \"name\") entry"));
+            return Err(cx.err(
+                &field("types"),
+                "at least one (type: n, material: \"name\") entry",
+            ));
         }
         let mut map: Vec<(u32, u16, bool)> = Vec::new();
         for (j, t) in types.iter().enumerate() {
             if map.iter().any(|m| m.0 == t.atom_type) {
                 return Err(cx.err(
                     &format!("grains[{k}].types[{j}].type"),
-                    format!("an atom type not already mapped (type {} appears twice)", t.atom_type),
+                    format!(
+                        "an atom type not already mapped (type {} appears twice)",
+                        t.atom_type
+                    ),
                 ));
             }
             let mat = material_id(&t.material, &format!("grains[{k}].types[{j}].material"))?;
@@ -1095,9 +1162,18 @@ impl Scene {
             cx.err(
                 &field("file"),
                 if e.line > 0 {
-                    format!("a valid LAMMPS data file: {}:{}: {}", path.display(), e.line, e.message)
+                    format!(
+                        "a valid LAMMPS data file: {}:{}: {}",
+                        path.display(),
+                        e.line,
+                        e.message
+                    )
                 } else {
-                    format!("a valid LAMMPS data file: {}: {}", path.display(), e.message)
+                    format!(
+                        "a valid LAMMPS data file: {}: {}",
+                        path.display(),
+                        e.message
+                    )
                 },
             )
         })?;
@@ -1106,20 +1182,32 @@ impl Scene {
             let Some(&(_, material, frozen)) = map.iter().find(|m| m.0 == a.atom_type) else {
                 return Err(cx.err(
                     &field("types"),
-                    format!("a material for atom type {} (atom {} in {})", a.atom_type, a.id, path.display()),
+                    format!(
+                        "a material for atom type {} (atom {} in {})",
+                        a.atom_type,
+                        a.id,
+                        path.display()
+                    ),
                 ));
             };
             if two_d && a.position.z != 0.0 {
                 return Err(cx.err(
                     &field("file"),
-                    format!("atoms in the plane z = 0 for a 2-D scene (atom {} has z = {})", a.id, a.position.z),
+                    format!(
+                        "atoms in the plane z = 0 for a 2-D scene (atom {} has z = {})",
+                        a.id, a.position.z
+                    ),
                 ));
             }
             out.push(GrainInit {
                 position: a.position,
                 radius: 0.5 * a.diameter,
                 velocity: if frozen { DVec3::ZERO } else { a.velocity },
-                angular_velocity: if frozen { DVec3::ZERO } else { a.angular_velocity },
+                angular_velocity: if frozen {
+                    DVec3::ZERO
+                } else {
+                    a.angular_velocity
+                },
                 material,
                 source: k,
                 density: Some(a.density),
@@ -1143,11 +1231,17 @@ fn check_periodic(
         hi: DVec3::ONE,
         axes: [false; 3],
     };
-    for (a, (name, extent)) in [("x", spec.x), ("y", spec.y), ("z", spec.z)].into_iter().enumerate() {
+    for (a, (name, extent)) in [("x", spec.x), ("y", spec.y), ("z", spec.z)]
+        .into_iter()
+        .enumerate()
+    {
         let Some((lo, hi)) = extent else { continue };
         let field = format!("periodic.{name}");
         if two_d && a == 2 {
-            return Err(cx.err(&field, "no periodic z axis in a 2-D scene (disks lie in the xy-plane)"));
+            return Err(cx.err(
+                &field,
+                "no periodic z axis in a 2-D scene (disks lie in the xy-plane)",
+            ));
         }
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
             return Err(cx.err(&field, "an extent (min, max) with min < max, in metres"));

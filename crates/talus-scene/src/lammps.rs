@@ -120,15 +120,22 @@ pub fn parse_data(text: &str) -> Result<Vec<Atom>, DataError> {
     if atoms.len() != declared {
         return Err(err(
             0,
-            format!("{declared} rows in the Atoms section (the header says so), found {}", atoms.len()),
+            format!(
+                "{declared} rows in the Atoms section (the header says so), found {}",
+                atoms.len()
+            ),
         ));
     }
     if !velocities.is_empty() {
-        let mut index: Vec<(u64, usize)> = atoms.iter().enumerate().map(|(i, a)| (a.id, i)).collect();
+        let mut index: Vec<(u64, usize)> =
+            atoms.iter().enumerate().map(|(i, a)| (a.id, i)).collect();
         index.sort_unstable();
         for (id, v, w, line) in velocities {
             let Ok(at) = index.binary_search_by_key(&id, |e| e.0) else {
-                return Err(err(line, format!("a velocity for an atom of the Atoms section, found id {id}")));
+                return Err(err(
+                    line,
+                    format!("a velocity for an atom of the Atoms section, found id {id}"),
+                ));
             };
             let a = &mut atoms[index[at].1];
             a.velocity = v;
@@ -160,10 +167,21 @@ fn read_rows<'a>(lines: &[&'a str], k: &mut usize) -> Vec<(usize, Vec<&'a str>)>
     rows
 }
 
-fn number<T: std::str::FromStr>(line: usize, fields: &[&str], i: usize, what: &str) -> Result<T, DataError> {
-    let s = fields.get(i).ok_or_else(|| err(line, format!("a {what} in column {}", i + 1)))?;
-    s.parse()
-        .map_err(|_| err(line, format!("a number for the {what} in column {}, found `{s}`", i + 1)))
+fn number<T: std::str::FromStr>(
+    line: usize,
+    fields: &[&str],
+    i: usize,
+    what: &str,
+) -> Result<T, DataError> {
+    let s = fields
+        .get(i)
+        .ok_or_else(|| err(line, format!("a {what} in column {}", i + 1)))?;
+    s.parse().map_err(|_| {
+        err(
+            line,
+            format!("a number for the {what} in column {}, found `{s}`", i + 1),
+        )
+    })
 }
 
 fn parse_atom(line: usize, f: &[&str]) -> Result<Atom, DataError> {
@@ -190,10 +208,16 @@ fn parse_atom(line: usize, f: &[&str]) -> Result<Atom, DataError> {
         angular_velocity: DVec3::ZERO,
     };
     if !(atom.diameter > 0.0 && atom.diameter.is_finite()) {
-        return Err(err(line, format!("a positive diameter, found {}", atom.diameter)));
+        return Err(err(
+            line,
+            format!("a positive diameter, found {}", atom.diameter),
+        ));
     }
     if !(atom.density > 0.0 && atom.density.is_finite()) {
-        return Err(err(line, format!("a positive density, found {}", atom.density)));
+        return Err(err(
+            line,
+            format!("a positive density, found {}", atom.density),
+        ));
     }
     if !atom.position.is_finite() {
         return Err(err(line, "finite coordinates"));
@@ -205,7 +229,10 @@ fn parse_velocity(line: usize, f: &[&str]) -> Result<(u64, DVec3, DVec3, usize),
     if f.len() != 7 {
         return Err(err(
             line,
-            format!("a Velocities row `id vx vy vz wx wy wz` (7 columns), found {}", f.len()),
+            format!(
+                "a Velocities row `id vx vy vz wx wy wz` (7 columns), found {}",
+                f.len()
+            ),
         ));
     }
     let id = number(line, f, 0, "atom id")?;

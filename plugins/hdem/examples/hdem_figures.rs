@@ -29,7 +29,11 @@ impl Table {
             .map(str::to_string)
             .collect();
         let rows = lines
-            .map(|l| l.split(',').map(|x| x.parse().unwrap_or(f64::NAN)).collect())
+            .map(|l| {
+                l.split(',')
+                    .map(|x| x.parse().unwrap_or(f64::NAN))
+                    .collect()
+            })
             .collect();
         Ok(Self { header, rows })
     }
@@ -55,7 +59,10 @@ fn main() -> Result<(), String> {
     let out = root.join("docs/laws/figures");
     std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
     let series = |kind: &str, model: &str| Table::read(&data.join(format!("{kind}-{model}.csv")));
-    let (conventional, hdem) = (series("rocking", "conventional")?, series("rocking", "hdem")?);
+    let (conventional, hdem) = (
+        series("rocking", "conventional")?,
+        series("rocking", "hdem")?,
+    );
     let (conventional_cycles, hdem_cycles) =
         (series("cycles", "conventional")?, series("cycles", "hdem")?);
     let save = |chart: Chart, name: &str| -> Result<PathBuf, String> {
@@ -70,8 +77,14 @@ fn main() -> Result<(), String> {
             Axis::linear("time (s)"),
             Axis::linear("θ − θ_rest (rad)"),
         )
-        .with(Series::line("conventional (elastic–plastic, ζ = 0.05)", conventional.points("time", "angle", 2)))
-        .with(Series::line("HDEM (β = 0.844, ζ = 0.02)", hdem.points("time", "angle", 2))),
+        .with(Series::line(
+            "conventional (elastic–plastic, ζ = 0.05)",
+            conventional.points("time", "angle", 2),
+        ))
+        .with(Series::line(
+            "HDEM (β = 0.844, ζ = 0.02)",
+            hdem.points("time", "angle", 2),
+        )),
         "hdem-rocking-angle.svg",
     )?;
     save(
@@ -80,8 +93,14 @@ fn main() -> Result<(), String> {
             Axis::linear("time (s)"),
             Axis::log("kinetic energy (J)"),
         )
-        .with(Series::line_and_points("conventional", conventional_cycles.points("time", "peak_kinetic", 1)))
-        .with(Series::line_and_points("HDEM", hdem_cycles.points("time", "peak_kinetic", 1))),
+        .with(Series::line_and_points(
+            "conventional",
+            conventional_cycles.points("time", "peak_kinetic", 1),
+        ))
+        .with(Series::line_and_points(
+            "HDEM",
+            hdem_cycles.points("time", "peak_kinetic", 1),
+        )),
         "hdem-kinetic-envelope.svg",
     )?;
     save(
@@ -90,8 +109,14 @@ fn main() -> Result<(), String> {
             Axis::linear("time (s)"),
             Axis::linear("π / half period (rad/s)"),
         )
-        .with(Series::points("conventional", conventional_cycles.points("time", "frequency", 1)))
-        .with(Series::points("HDEM", hdem_cycles.points("time", "frequency", 1))),
+        .with(Series::points(
+            "conventional",
+            conventional_cycles.points("time", "frequency", 1),
+        ))
+        .with(Series::points(
+            "HDEM",
+            hdem_cycles.points("time", "frequency", 1),
+        )),
         "hdem-frequency.svg",
     )?;
     let share: Vec<(f64, f64)> = {
@@ -118,10 +143,22 @@ fn main() -> Result<(), String> {
             Axis::linear("time (s)"),
             Axis::linear("dissipated energy (J)"),
         )
-        .with(Series::line("rolling_hysteresis", hdem.points("time", "hysteresis", 10)))
-        .with(Series::line("rolling_damping", hdem.points("time", "damping", 10)))
-        .with(Series::line("rolling_slip", hdem.points("time", "slip", 10)))
-        .with(Series::line("conventional: rolling_damping", conventional.points("time", "damping", 10))),
+        .with(Series::line(
+            "rolling_hysteresis",
+            hdem.points("time", "hysteresis", 10),
+        ))
+        .with(Series::line(
+            "rolling_damping",
+            hdem.points("time", "damping", 10),
+        ))
+        .with(Series::line(
+            "rolling_slip",
+            hdem.points("time", "slip", 10),
+        ))
+        .with(Series::line(
+            "conventional: rolling_damping",
+            conventional.points("time", "damping", 10),
+        )),
         "hdem-dissipation.svg",
     )?;
     Ok(())

@@ -105,16 +105,35 @@ fn loop_loss_is_rate_independent_and_equals_the_analytic_area() {
         let quarter = per / 4;
         let theta = |t: f64| amplitude * (2.0 * std::f64::consts::PI * t / period).sin();
         let mut history = HdemHistory::default();
-        let totals = drive(&p, theta, dt, per + quarter, quarter..per + quarter, &mut history);
+        let totals = drive(
+            &p,
+            theta,
+            dt,
+            per + quarter,
+            quarter..per + quarter,
+            &mut history,
+        );
         let error = (totals.hysteresis - analytic).abs() / analytic;
         let trapezoid = (totals.work_on_spring - analytic).abs() / analytic;
         eprintln!(
             "period {period} s: loop loss {:.6e} J, analytic {analytic:.6e} J, relative error {error:.2e}; \
              trapezoidal ∮M dθ {:.6e} J (error {trapezoid:.2e}); dashpot {:.1e}, slip {:.1e}, integration error {:.2e} J",
-            totals.hysteresis, totals.work_on_spring, totals.damping, totals.slip, totals.integration_error
+            totals.hysteresis,
+            totals.work_on_spring,
+            totals.damping,
+            totals.slip,
+            totals.integration_error
         );
-        assert!(error < 1e-3, "loop loss {} against {analytic}", totals.hysteresis);
-        assert!(trapezoid < 1e-2, "trapezoidal loop work {}", totals.work_on_spring);
+        assert!(
+            error < 1e-3,
+            "loop loss {} against {analytic}",
+            totals.hysteresis
+        );
+        assert!(
+            trapezoid < 1e-2,
+            "trapezoidal loop work {}",
+            totals.work_on_spring
+        );
         assert_eq!(totals.slip, 0.0);
         losses.push(totals.hysteresis);
     }
@@ -136,13 +155,19 @@ fn branches_follow_equations_12_and_13() {
     spring.advance(0.25 * de, &l);
     let loading = spring.moment(&l);
     let expected = me * 0.25f64.powf(beta);
-    assert!((loading - expected).abs() < 1e-12 * me, "{loading} vs {expected}");
+    assert!(
+        (loading - expected).abs() < 1e-12 * me,
+        "{loading} vs {expected}"
+    );
     // Unload half way back.
     let (rev_d, rev_m) = (spring.deformation, loading);
     spring.advance(-0.125 * de, &l);
     let unloading = spring.moment(&l);
     let expected = rev_m * (1.0 - (1.0 - 0.125 * de / rev_d).powf(beta));
-    assert!((unloading - expected).abs() < 1e-12 * me, "{unloading} vs {expected}");
+    assert!(
+        (unloading - expected).abs() < 1e-12 * me,
+        "{unloading} vs {expected}"
+    );
     // Load far past the limit: slides at M_e.
     let mut spring = HysteresisState::default();
     let step = spring.advance(3.0 * de, &l);

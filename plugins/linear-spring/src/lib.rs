@@ -105,7 +105,11 @@ pub fn damping_from_restitution(e: f64, k: f64, m: f64) -> f64 {
 /// overdamped.
 pub fn collision_time(k: f64, c: f64, m: f64) -> f64 {
     let w2 = k / m - (c / (2.0 * m)).powi(2);
-    if w2 > 0.0 { PI / w2.sqrt() } else { f64::INFINITY }
+    if w2 > 0.0 {
+        PI / w2.sqrt()
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Restitution of that collision: exp(−ζπ/√(1 − ζ²)), ζ = c / (2√(m k)); 0 when
@@ -165,7 +169,9 @@ impl ContactLaw for LinearSpring {
             let old_normal = spring.normal_spring;
             out.integration_error = 0.5 * old_normal.dot(displacement)
                 - 0.5 * old_normal.length_squared() / p.normal_stiffness
-                + 0.5 * kt * (rotated.dot(tangential_displacement) - spring.spring.dot(displacement));
+                + 0.5
+                    * kt
+                    * (rotated.dot(tangential_displacement) - spring.spring.dot(displacement));
             *spring = TangentialSpring::default();
             return out;
         }
@@ -346,7 +352,11 @@ impl LinearSpringLaw {
             }
             (None, None) => return Err(err("stiffness", "`stiffness` or `collision_time`")),
         };
-        let damping = match (values.get("damping"), restitution, values.get("damping_rate")) {
+        let damping = match (
+            values.get("damping"),
+            restitution,
+            values.get("damping_rate"),
+        ) {
             (Some(c), None, None) => NormalDamping::Coefficient(c),
             (None, Some(e), None) => NormalDamping::Ratio(damping_ratio_from_restitution(e)),
             (None, None, Some(gamma)) => NormalDamping::Rate(gamma),

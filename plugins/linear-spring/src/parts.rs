@@ -161,7 +161,9 @@ impl SubModel for CoulombSpring {
     fn resolve(values: &ParamValues, _pair: &PairAssignment) -> Result<CoulombParams, ParamError> {
         Ok(CoulombParams {
             friction: values.get("friction").unwrap_or(0.0),
-            stiffness_ratio: values.get("tangential_stiffness_ratio").unwrap_or(2.0 / 7.0),
+            stiffness_ratio: values
+                .get("tangential_stiffness_ratio")
+                .unwrap_or(2.0 / 7.0),
             damping_ratio: values.get("tangential_damping_ratio").unwrap_or(0.0),
         })
     }

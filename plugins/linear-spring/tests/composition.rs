@@ -55,11 +55,16 @@ fn compare(values: &[(&str, f64)]) {
     let parts = talus_linear_spring::parts::composed_descriptor();
     let (pw, _) = whole.resolve(&pair).unwrap();
     let (pc, _) = parts.resolve(&pair).unwrap();
-    let pw = pw.downcast_ref::<<LinearSpring as ContactLaw>::Params>().unwrap();
+    let pw = pw
+        .downcast_ref::<<LinearSpring as ContactLaw>::Params>()
+        .unwrap();
     let pc = pc
         .downcast_ref::<<ComposedLinearSpring as ContactLaw>::Params>()
         .unwrap();
-    assert_eq!(LinearSpring::dissipation(), ComposedLinearSpring::dissipation());
+    assert_eq!(
+        LinearSpring::dissipation(),
+        ComposedLinearSpring::dissipation()
+    );
     let mut hw = Default::default();
     let mut hc = Default::default();
     let dt = 1e-5;
@@ -75,11 +80,27 @@ fn compare(values: &[(&str, f64)]) {
             (a.torque_a, b.torque_a),
             (a.torque_b, b.torque_b),
         ] {
-            assert_eq!(x.to_array().map(f64::to_bits), y.to_array().map(f64::to_bits), "step {step}");
+            assert_eq!(
+                x.to_array().map(f64::to_bits),
+                y.to_array().map(f64::to_bits),
+                "step {step}"
+            );
         }
-        assert_eq!(a.elastic_energy.to_bits(), b.elastic_energy.to_bits(), "step {step}");
-        assert_eq!(a.integration_error.to_bits(), b.integration_error.to_bits(), "step {step}");
-        assert_eq!(a.dissipated.map(f64::to_bits), b.dissipated.map(f64::to_bits), "step {step}");
+        assert_eq!(
+            a.elastic_energy.to_bits(),
+            b.elastic_energy.to_bits(),
+            "step {step}"
+        );
+        assert_eq!(
+            a.integration_error.to_bits(),
+            b.integration_error.to_bits(),
+            "step {step}"
+        );
+        assert_eq!(
+            a.dissipated.map(f64::to_bits),
+            b.dissipated.map(f64::to_bits),
+            "step {step}"
+        );
         slid |= a.dissipated[2] > 0.0;
         in_contact += usize::from(kin.overlap > 0.0);
     }
