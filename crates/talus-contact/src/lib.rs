@@ -23,4 +23,4 @@ pub use compose::{
 pub use kinematics::ContactKinematics;
 pub use law::*;
 pub use params::*;
-pub use systems::ContactPlugin;
+pub use systems::{ContactPlugin, unbalanced_force_ratio};

@@ -289,3 +289,26 @@ pub fn apply_contact_forces(
         }
     }
 }
+
+/// The unbalanced-force ratio of the packing (Yade's `unbalancedForce`): the mean size
+/// of the net force on the free grains (contacts and body forces, as summed in the
+/// `Force` accumulators after [`Stage::BodyForces`]) over the mean size of the active
+/// contact forces. It tends to 0 as a packing reaches static equilibrium; `None` when
+/// there is no active contact or no free grain. Read it after a step, not inside one.
+pub fn unbalanced_force_ratio(world: &mut World) -> Option<f64> {
+    let mut grains = world.query_filtered::<&Force, (With<Grain>, Without<Frozen>)>();
+    let (mut net, mut n) = (0.0, 0usize);
+    for f in grains.iter(world) {
+        net += f.0.length();
+        n += 1;
+    }
+    let mut contacts = world.query::<(&ContactGeometry, &ContactForce)>();
+    let (mut contact, mut m) = (0.0, 0usize);
+    for (g, f) in contacts.iter(world) {
+        if f.is_active(g) {
+            contact += f.force.length();
+            m += 1;
+        }
+    }
+    (n > 0 && m > 0 && contact > 0.0).then(|| (net / n as f64) / (contact / m as f64))
+}
