@@ -248,7 +248,8 @@ pub fn run_scene(
                 progress.set_position(step);
                 progress.set_message(format!("{:.4} s", sim.time()));
             }
-            if step % report_every == 0 || step == total_steps {
+            let requested = sim.world.resource::<StopRequest>().0.clone();
+            if step % report_every == 0 || step == total_steps || requested.is_some() {
                 let sample = ReportSample::take(&sim.world);
                 let settled = built
                     .stop
@@ -256,6 +257,10 @@ pub fn run_scene(
                     .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
                 samples.push(sample);
                 last_good = Some(save_state(&mut sim.world));
+                if let Some(reason) = requested {
+                    stopped = reason;
+                    break;
+                }
                 if settled {
                     stopped = "settled".into();
                     break;

@@ -147,3 +147,8 @@ pub struct Health {
     /// Largest overlap / radius allowed before a run is stopped. Default: 0.5.
     pub max_overlap_ratio: f64,
 }
+
+/// Set by a protocol system (a packing generator reaching its target, say) when the run
+/// has done what it was for; the driver ends the run after the step and reports the reason.
+#[derive(Resource, Clone, Debug, Default, PartialEq)]
+pub struct StopRequest(pub Option<String>);

@@ -113,6 +113,7 @@ impl SimBuilder {
     pub fn new(config: SimConfig) -> Self {
         let mut world = World::new();
         world.insert_resource(Clock::default());
+        world.insert_resource(crate::resources::StopRequest::default());
         world.insert_resource(StageTimings::default());
         world.insert_resource(Health {
             blow_up: None,
