@@ -27,6 +27,7 @@ fn same_scene_twice_gives_bit_identical_reports() {
             out: Some(dir.join(name)),
             quiet: true,
             progress: false,
+            ..Default::default()
         };
         let mut report = run_scene(&scene, &talus::registry(), &options)
             .unwrap()

@@ -365,6 +365,7 @@ fn too_large_a_time_step_stops_with_a_diagnosis_and_the_last_good_state() {
         out: Some(dir.join("out")),
         quiet: true,
         progress: false,
+        ..Default::default()
     };
     match run_scene(&scene, &talus::registry(), &options) {
         Err(RunError::BlowUp {
@@ -378,12 +379,12 @@ fn too_large_a_time_step_stops_with_a_diagnosis_and_the_last_good_state() {
                 message.contains("wall `floor`"),
                 "names the wall: {message}"
             );
-            let state = dir.join("out").join("last_good_state.json");
-            let text = std::fs::read_to_string(&state).expect("last good state written");
-            let json: serde_json::Value = serde_json::from_str(&text).unwrap();
-            let grains = json["grains"].as_array().unwrap();
-            assert_eq!(grains.len(), 1);
-            assert!(grains[0]["position"][2].as_f64().unwrap().is_finite());
+            let state = dir.join("out").join("last_good_state.ron");
+            let state = talus::scene::state::SavedState::read(&state)
+                .expect("last good state written, readable as a state");
+            assert_eq!(state.grains.len(), 1);
+            assert!(state.grains[0].position.is_finite());
+            assert!(state.grains[0].velocity.is_finite());
             let report: serde_json::Value =
                 serde_json::from_str(&std::fs::read_to_string(report_path).unwrap()).unwrap();
             assert_eq!(report["stopped"], "blow_up");

@@ -13,6 +13,7 @@ fn run(scene: &Path, name: &str) -> Report {
         out: Some(common::temp_dir(name)),
         quiet: true,
         progress: false,
+        ..Default::default()
     };
     run_scene(scene, &talus::registry(), &options)
         .unwrap()

@@ -29,6 +29,7 @@ fn recording_holds_all_grains_and_one_strip_per_contact() {
         out: Some(dir.join("out")),
         quiet: true,
         progress: false,
+        ..Default::default()
     };
     let summary = run_scene(&scene, &talus::registry(), &options).unwrap();
     let n = summary.report.grain_count;

@@ -903,6 +903,7 @@ fn report_and_recording_carry_the_stress_series() {
             out: Some(dir.join(name)),
             quiet: true,
             progress: false,
+            ..Default::default()
         };
         talus::cli::run_scene(&path, &talus::registry(), &options).unwrap()
     };

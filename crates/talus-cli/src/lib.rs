@@ -42,6 +42,13 @@ pub enum Command {
         /// No progress bar and no summary.
         #[arg(long)]
         quiet: bool,
+        /// Continue the run saved in this state file (a `state.ron` or
+        /// `last_good_state.ron` this scene wrote) up to the scene's end.
+        #[arg(long, value_name = "STATE")]
+        resume: Option<PathBuf>,
+        /// Write the final state to DIR/state.ron (also when the scene does not ask).
+        #[arg(long)]
+        save_state: bool,
     },
     /// Validate a scene and print its plan without running it.
     Check {
@@ -113,6 +120,8 @@ pub fn main_with(registry: LawRegistry) -> ExitCode {
             out,
             threads,
             quiet,
+            resume,
+            save_state,
         } => {
             if let Some(n) = threads
                 && let Err(e) = rayon::ThreadPoolBuilder::new()
@@ -126,6 +135,8 @@ pub fn main_with(registry: LawRegistry) -> ExitCode {
                 out,
                 quiet,
                 progress: !quiet,
+                resume,
+                save_state,
             };
             match run_scene(&scene, &registry, &options) {
                 Ok(summary) => {

@@ -12,6 +12,7 @@ use serde::Serialize;
 use talus_contact::LawRegistry;
 use talus_core::prelude::*;
 use talus_scene::SceneError;
+use talus_scene::state::SavedState;
 
 use crate::report::{BlowUpReport, Report, ReportSample, WallClock};
 
@@ -24,6 +25,11 @@ pub struct RunOptions {
     pub quiet: bool,
     /// Show a progress bar (only drawn on a terminal).
     pub progress: bool,
+    /// Continue the run saved in this state file (written by this scene's run) instead
+    /// of starting it: bit-identical to the run that was not interrupted.
+    pub resume: Option<PathBuf>,
+    /// Write the final state to `state.ron` even if the scene does not ask for it.
+    pub save_state: bool,
 }
 
 /// What a finished run produced.
@@ -37,6 +43,8 @@ pub struct RunSummary {
     pub report_path: PathBuf,
     /// The report.
     pub report: Report,
+    /// The final state, if one was written.
+    pub state: Option<PathBuf>,
 }
 
 impl RunSummary {
@@ -55,6 +63,13 @@ impl RunSummary {
             r.wall_clock.grain_steps_per_second
         );
         s += &format!("report:    {}\n", self.report_path.display());
+        if let Some(state) = &self.state {
+            s += &format!(
+                "state:     {}  (continue with `talus run SCENE --resume {}`)\n",
+                state.display(),
+                state.display()
+            );
+        }
         if let Some(rec) = &self.recording {
             s += &format!(
                 "recording: {}  (open with the rerun viewer 0.36.3: `rerun {}`)\n",
@@ -134,50 +149,6 @@ pub fn check_scene(path: &Path, registry: &LawRegistry) -> Result<String, SceneE
     Ok(s)
 }
 
-#[derive(Serialize)]
-struct GrainState {
-    entity: u64,
-    position: [f64; 3],
-    velocity: [f64; 3],
-    angular_velocity: [f64; 3],
-    radius: f64,
-    material: u16,
-}
-
-#[derive(Serialize)]
-struct SavedState {
-    step: u64,
-    time: f64,
-    grains: Vec<GrainState>,
-}
-
-fn save_state(world: &mut World) -> SavedState {
-    let clock = *world.resource::<Clock>();
-    let mut q = world.query_filtered::<(
-        Entity,
-        &Position,
-        &Velocity,
-        &AngularVelocity,
-        &Radius,
-        &MaterialId,
-    ), With<Grain>>();
-    SavedState {
-        step: clock.step,
-        time: clock.time,
-        grains: q
-            .iter(world)
-            .map(|(e, p, v, w, r, m)| GrainState {
-                entity: e.to_bits(),
-                position: p.0.to_array(),
-                velocity: v.0.to_array(),
-                angular_velocity: w.0.to_array(),
-                radius: r.0,
-                material: m.0,
-            })
-            .collect(),
-    }
-}
-
 fn steps_for(interval: f64, dt: f64) -> u64 {
     ((interval / dt).round() as u64).max(1)
 }
@@ -189,7 +160,14 @@ pub fn run_scene(
     options: &RunOptions,
 ) -> Result<RunSummary, RunError> {
     let scene = talus_scene::load(path)?;
-    let built = scene.build(registry)?;
+    let built = match &options.resume {
+        Some(state_path) => {
+            let state = SavedState::read(state_path).map_err(RunError::Output)?;
+            scene.resume(registry, &state)?
+        }
+        None => scene.build(registry)?,
+    };
+    let resumed = built.resumed;
     let out_dir = options
         .out
         .clone()
@@ -210,6 +188,9 @@ pub fn run_scene(
         None
     };
     let mut sim = builder.build();
+    if resumed {
+        sim.mark_primed();
+    }
     let report_every = steps_for(built.output.report_interval, dt);
     let config = sim.config().clone();
     let total_steps = built.stop.steps;
@@ -238,8 +219,8 @@ pub fn run_scene(
         blow_up = Some(b);
     } else {
         samples.push(ReportSample::take(&sim.world));
-        last_good = Some(save_state(&mut sim.world));
-        for step in 1..=total_steps {
+        last_good = Some(SavedState::capture(&mut sim.world, &built.name));
+        for step in sim.step_count() + 1..=total_steps {
             if let Err(b) = sim.step() {
                 blow_up = Some(b);
                 break;
@@ -256,7 +237,7 @@ pub fn run_scene(
                     .settle_kinetic_energy
                     .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
                 samples.push(sample);
-                last_good = Some(save_state(&mut sim.world));
+                last_good = Some(SavedState::capture(&mut sim.world, &built.name));
                 if let Some(reason) = requested {
                     stopped = reason;
                     break;
@@ -308,10 +289,10 @@ pub fn run_scene(
     let mut blow_message = None;
     if let Some(b) = blow_up {
         report.stopped = "blow_up".into();
-        let state_path = out_dir.join("last_good_state.json");
+        let state_path = out_dir.join("last_good_state.ron");
         let written = last_good
             .as_ref()
-            .map(|s| write_json(&state_path, s))
+            .map(|s| s.write(&state_path).map_err(RunError::Output))
             .transpose()?
             .map(|_| state_path.display().to_string());
         let bodies: Vec<String> = b
@@ -338,6 +319,13 @@ pub fn run_scene(
             last_good_state: written,
         });
     }
+    let state_path = (blow_message.is_none() && (built.output.state || options.save_state))
+        .then(|| out_dir.join("state.ron"));
+    if let Some(p) = &state_path {
+        SavedState::capture(&mut sim.world, &built.name)
+            .write(p)
+            .map_err(RunError::Output)?;
+    }
     write_json(&report_path, &report)?;
     if let Some(message) = blow_message {
         return Err(RunError::BlowUp {
@@ -350,10 +338,11 @@ pub fn run_scene(
         recording,
         report_path,
         report,
+        state: state_path,
     })
 }
 
-/// A body named for a person: a grain by its entity id (as in `last_good_state.json`),
+/// A body named for a person: a grain by its entity id,
 /// position and radius, a wall by its name.
 fn describe_body(world: &World, e: Entity) -> String {
     if let Some(wall) = world.get::<Wall>(e) {

@@ -30,6 +30,8 @@ pub struct ContactIndex {
     /// Pairs found touching this pass, per chunk of grains (dense indices; walls are
     /// encoded as `u32::MAX - wall index`).
     found: Vec<Vec<(u32, u32)>>,
+    /// Contacts that ended this pass (scratch).
+    ended: Vec<Entity>,
 }
 
 impl ContactIndex {
@@ -43,19 +45,31 @@ impl ContactIndex {
         self.len() == 0
     }
 
-    /// The contact entity of a pair, if they are in contact.
+    /// The contact entity of a pair, if they are in contact (in either order).
     pub fn contact_between(&self, a: Entity, b: Entity) -> Option<Entity> {
-        let (a, b) = canonical(a, b);
-        self.per_grain
-            .get(a.index_u32() as usize)?
-            .iter()
-            .find(|e| e.partner == b)
-            .map(|e| e.contact)
+        let find = |first: Entity, second: Entity| {
+            self.per_grain
+                .get(first.index_u32() as usize)?
+                .iter()
+                .find(|e| e.partner == second)
+                .map(|e| e.contact)
+        };
+        find(a, b).or_else(|| find(b, a))
     }
-}
 
-fn canonical(a: Entity, b: Entity) -> (Entity, Entity) {
-    if a <= b { (a, b) } else { (b, a) }
+    /// Enters an existing contact entity between grain `a` (the contact's first body) and
+    /// body `b`: for contacts restored from a saved state.
+    pub fn register(&mut self, a: Entity, b: Entity, contact: Entity) {
+        let k = a.index_u32() as usize;
+        if self.per_grain.len() <= k {
+            self.per_grain.resize_with(k + 1, SmallVec::new);
+        }
+        self.per_grain[k].push(IndexEntry {
+            partner: b,
+            contact,
+            seen: self.pass,
+        });
+    }
 }
 
 /// Finds all touching grain–grain and grain–wall pairs among the neighbour list's
@@ -121,7 +135,10 @@ fn update_contacts_inner(
     index.pass += 1;
     let pass = index.pass;
     let ContactIndex {
-        per_grain, found, ..
+        per_grain,
+        found,
+        ended,
+        ..
     } = index;
     let max_entity = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
     if per_grain.len() <= max_entity {
@@ -135,8 +152,14 @@ fn update_contacts_inner(
                 let wall = &s.walls[(u32::MAX - j) as usize];
                 (ea, wall.entity, ContactKind::GrainWall, wall.material)
             } else {
-                let (a, b) = canonical(ea, s.entity[j as usize]);
-                (a, b, ContactKind::GrainGrain, s.material[j as usize])
+                // The grain first in dense order is `a` (never the entity ids, which
+                // depend on the history of spawns: a restored run must choose alike).
+                (
+                    ea,
+                    s.entity[j as usize],
+                    ContactKind::GrainGrain,
+                    s.material[j as usize],
+                )
             };
             let entries = &mut per_grain[a.index_u32() as usize];
             if let Some(entry) = entries.iter_mut().find(|e| e.partner == b) {
@@ -162,6 +185,7 @@ fn update_contacts_inner(
             });
         }
     }
+    ended.clear();
     for entries in per_grain.iter_mut() {
         entries.retain(|e| {
             if e.seen == pass {
@@ -174,12 +198,19 @@ fn update_contacts_inner(
                 .get::<ContactGeometry>(e.contact)
                 .zip(world.get::<ContactForce>(e.contact))
                 .is_some_and(|(g, f)| f.is_active(g));
-            if acted {
-                true
-            } else {
-                world.despawn(e.contact);
-                false
+            if !acted {
+                ended.push(e.contact);
             }
+            acted
         });
+    }
+    // Despawning moves the last contact of the table into the freed row, so the order of
+    // removals sets the order in which forces are summed from then on. Remove in table
+    // order (a fixed function of the state, not of entity ids or of the index's
+    // layout), last row first so that no removal moves a contact still to be removed.
+    ended
+        .sort_unstable_by_key(|&c| std::cmp::Reverse(world.entity(c).location().table_row.index()));
+    for &c in ended.iter() {
+        world.despawn(c);
     }
 }

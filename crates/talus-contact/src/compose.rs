@@ -153,8 +153,15 @@ pub trait SubModel: Send + Sync + 'static {
     const DISSIPATION: &'static [&'static str];
     /// Parameters resolved for one material pair.
     type Params: Clone + Send + Sync + 'static;
-    /// Per-contact history, `Default` when the contact starts.
-    type History: Default + Clone + Send + Sync + 'static;
+    /// Per-contact history, `Default` when the contact starts. Serializable so that a
+    /// saved state keeps it (and, later, so that it can migrate with its grains).
+    type History: Default
+        + Clone
+        + Send
+        + Sync
+        + serde::Serialize
+        + serde::de::DeserializeOwned
+        + 'static;
 
     /// Resolves the typed parameters of a pair (values are range-checked and mixed).
     fn resolve(values: &ParamValues, pair: &PairAssignment) -> Result<Self::Params, ParamError>;
@@ -235,6 +242,8 @@ pub struct Composed<N, D, T, R = NoRolling, W = NoTwisting, C = NoCohesion>(
 );
 
 /// Per-contact history of a composed law: one field per part.
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct ComposedHistory<
     N: SubModel,
     D: SubModel,

@@ -43,8 +43,15 @@ pub struct ContactResponse {
 pub trait ContactLaw: Send + Sync + 'static {
     /// Parameters resolved for one material pair (after mixing and validation).
     type Params: Clone + Send + Sync + 'static;
-    /// Per-contact history, created with `Default` when the contact starts.
-    type History: Default + Clone + Send + Sync + 'static;
+    /// Per-contact history, created with `Default` when the contact starts. Serializable
+    /// so that a saved state keeps it (and, later, so that it can migrate with its grains).
+    type History: Default
+        + Clone
+        + Send
+        + Sync
+        + serde::Serialize
+        + serde::de::DeserializeOwned
+        + 'static;
     /// Names of the dissipation mechanisms, indexing [`ContactResponse::dissipated`]
     /// (asked once, when the law is installed).
     fn dissipation() -> Vec<&'static str>;
@@ -152,6 +159,33 @@ fn spawn_contact<L: ContactLaw>(world: &mut World, contact: Contact) -> Entity {
         .id()
 }
 
+/// The history of a contact of law `L` as RON text, for a saved state.
+fn contact_history<L: ContactLaw>(world: &World, contact: Entity) -> Option<String> {
+    let state = world.get::<LawState<L::History>>(contact)?;
+    ron::to_string(&state.0).ok()
+}
+
+/// Re-creates a saved contact of law `L`: its geometry and force of the last evaluation
+/// (which the next step reads) and its history parsed from RON text.
+fn restore_contact<L: ContactLaw>(
+    world: &mut World,
+    contact: Contact,
+    geometry: ContactGeometry,
+    force: ContactForce,
+    history: &str,
+) -> Result<Entity, String> {
+    let history: L::History = ron::from_str(history).map_err(|e| e.to_string())?;
+    Ok(world
+        .spawn((
+            contact,
+            geometry,
+            force,
+            ContactEnergy::default(),
+            LawState::<L::History>(history),
+        ))
+        .id())
+}
+
 /// Installs a law for the given pairs: registers its dissipation channels, its
 /// parameter table, its contact spawner for each pair, and its force system.
 /// Requires [`crate::ContactPlugin`] to have been added.
@@ -191,9 +225,27 @@ pub fn install_law<L: ContactLaw>(
             law: name,
             pair_slot: slot as u32,
             spawn: spawn_contact::<L>,
+            law_type: std::any::type_name::<L>(),
+            history: contact_history::<L>,
+            restore: restore_contact::<L>,
         });
         law_table.slots[a as usize * n + b as usize] = entry.clone();
         law_table.slots[b as usize * n + a as usize] = entry;
+    }
+    // Create this law's contact archetype now, so that contacts are iterated (and their
+    // forces summed) law by law in installation order, whichever law's contact came
+    // first: a run restored from a saved state then sums in the same order.
+    if !pairs.is_empty() {
+        let probe = spawn_contact::<L>(
+            &mut sim.world,
+            Contact {
+                a: Entity::PLACEHOLDER,
+                b: Entity::PLACEHOLDER,
+                kind: ContactKind::GrainGrain,
+                pair_slot: 0,
+            },
+        );
+        sim.world.despawn(probe);
     }
     sim.world.insert_resource(PairParams::<L>(table));
     sim.world.insert_resource(LawChannels::<L> {

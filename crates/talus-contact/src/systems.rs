@@ -22,6 +22,13 @@ pub struct LawSlot {
     pub pair_slot: u32,
     /// Spawns a contact entity with the law's history component.
     pub spawn: fn(&mut World, Contact) -> Entity,
+    /// The law's Rust type name: a saved contact is restored only into the same law.
+    pub law_type: &'static str,
+    /// The history of one of this law's contacts as RON text (saved states).
+    pub history: fn(&World, Entity) -> Option<String>,
+    /// Re-creates a saved contact with its geometry, force and history (RON text).
+    pub restore:
+        fn(&mut World, Contact, ContactGeometry, ContactForce, &str) -> Result<Entity, String>,
 }
 
 /// Which law handles each material pair, indexed by `a * n_materials + b`.

@@ -27,7 +27,7 @@ impl DissipationChannels {
 }
 
 /// Running totals of the energy flows since the start of the run, joules.
-#[derive(Resource, Clone, Debug, Default)]
+#[derive(Resource, Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EnergyLedger {
     /// Work done on the grains by gravity, Σ m g·Δx.
     pub gravity_work: f64,
@@ -50,7 +50,7 @@ impl EnergyLedger {
 }
 
 /// Instantaneous energies of the current state, recomputed by the sample stage.
-#[derive(Resource, Clone, Debug, Default)]
+#[derive(Resource, Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EnergySnapshot {
     /// Σ ½ m v².
     pub translational_kinetic: f64,
@@ -70,6 +70,8 @@ pub struct EnergySnapshot {
     pub contacts: usize,
     /// Largest overlap divided by the smaller radius of the pair (walls: the grain radius).
     pub max_overlap_ratio: f64,
-    /// The two bodies of the contact with the largest overlap ratio.
+    /// The two bodies of the contact with the largest overlap ratio (not saved with a
+    /// state: entity ids do not survive a restart).
+    #[serde(skip)]
     pub worst_overlap_pair: Option<(Entity, Entity)>,
 }

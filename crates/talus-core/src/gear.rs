@@ -29,8 +29,8 @@ const POSITION_CORRECTOR: [f64; 6] = [
 /// ω, dt ω', dt²/2 ω'', dt³/6 ω'''.
 const SPIN_CORRECTOR: [f64; 4] = [3.0 / 8.0, 1.0, 3.0 / 4.0, 1.0 / 6.0];
 
-/// Scaled higher derivatives of every moving grain, in query order.
-#[derive(Resource, Default)]
+/// Scaled higher derivatives of every moving grain, in query order (saved with a state).
+#[derive(Resource, Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GearHistory {
     /// Per grain: dt²/2 r'', dt³/6 r''', dt⁴/24 r⁗, dt⁵/120 r⁽⁵⁾.
     position: Vec<[DVec3; 4]>,

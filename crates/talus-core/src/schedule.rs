@@ -339,6 +339,14 @@ pub struct Simulation {
 }
 
 impl Simulation {
+    /// Marks the forces of the current state as already evaluated, so that no priming
+    /// pass runs: for a state restored from a save, whose forces, contact histories and
+    /// energies are those the saving run had computed (a priming pass would re-evaluate
+    /// the contacts and could change their histories in the last bits).
+    pub fn mark_primed(&mut self) {
+        self.primed = true;
+    }
+
     /// Evaluates the forces of the initial state without moving anything (a pass with
     /// zero time advance), so that the first velocity kick uses them. Idempotent.
     pub fn prime(&mut self) -> Result<(), BlowUp> {

@@ -26,9 +26,11 @@ pub const MAX_WALLS: usize = 1024;
 /// part, not the contact time, limits it.
 pub const STABILITY_SAFETY: f64 = 0.2;
 use crate::error::SceneError;
-use crate::generate::{GrainInit, generate};
+use crate::generate::{GrainInit, RESTORED_SOURCE, generate};
 use crate::locate::Locator;
 use crate::schema::*;
+use crate::state::{RestoreMode, SavedState};
+use bevy_ecs::prelude::*;
 
 /// When a run stops.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,6 +58,33 @@ pub struct BuiltScene {
     /// The smallest stability limit of the step over the scene's material pairs, s
     /// (infinite when no pair reports one).
     pub stability_limit: f64,
+    /// Whether the scene was resumed from a saved state ([`Scene::resume`]): its forces
+    /// are those of the state, so the simulation must be marked primed, not primed.
+    pub resumed: bool,
+}
+
+/// Puts a resumed run's walls, clock, energy totals and integrator history back.
+fn restore_run(world: &mut World, state: &SavedState) {
+    let mut q = world.query::<(&mut Wall, &mut WallLoad)>();
+    for (mut w, mut load) in q.iter_mut(world) {
+        if let Some(s) = state.walls.iter().find(|s| s.name == w.name) {
+            w.point = s.point;
+            w.normal = s.normal;
+            w.velocity = s.velocity;
+            load.0 = s.load;
+        }
+    }
+    {
+        let mut clock = world.resource_mut::<Clock>();
+        clock.step = state.step;
+        clock.time = state.time;
+        clock.pass_dt = state.time_step;
+    }
+    world.insert_resource(state.ledger.clone());
+    world.insert_resource(state.energy.clone());
+    if let Some(gear) = &state.gear {
+        world.insert_resource(gear.clone());
+    }
 }
 
 struct Ctx<'a> {
@@ -102,6 +131,28 @@ impl Plugin for LawInstall<'_> {
 impl Scene {
     /// Validates the scene against the registered laws and builds its simulation.
     pub fn build(&self, registry: &LawRegistry) -> Result<BuiltScene, SceneError> {
+        self.build_inner(registry, None)
+    }
+
+    /// Validates the scene and builds it resumed from a state its own run saved: the
+    /// grains, walls, contacts (with their histories), periodic box, clock, energy
+    /// totals and time step come from the state, the rest (laws, plugins, outputs, the
+    /// end of the run) from the scene. Stepping it continues the saved run bit for bit;
+    /// call [`talus_core::schedule::Simulation::mark_primed`] (see
+    /// [`BuiltScene::resumed`]) instead of priming it.
+    pub fn resume(
+        &self,
+        registry: &LawRegistry,
+        state: &SavedState,
+    ) -> Result<BuiltScene, SceneError> {
+        self.build_inner(registry, Some(state))
+    }
+
+    fn build_inner(
+        &self,
+        registry: &LawRegistry,
+        resume: Option<&SavedState>,
+    ) -> Result<BuiltScene, SceneError> {
         let cx = Ctx {
             scene: self,
             locator: Locator::new(&self.source),
@@ -401,9 +452,90 @@ impl Scene {
             }
         }
 
+        // A saved state to start from or to resume.
+        let start_state = match (resume, &f.start_from) {
+            (None, Some(file)) => {
+                let path = self
+                    .path
+                    .parent()
+                    .map_or_else(|| Path::new(file).to_path_buf(), |d| d.join(file));
+                Some(
+                    SavedState::read(&path)
+                        .map_err(|e| cx.err("start_from", format!("a Talus state file: {e}")))?,
+                )
+            }
+            _ => None,
+        };
+        let restore: Option<(&SavedState, RestoreMode)> = match (resume, &start_state) {
+            (Some(s), _) => Some((s, RestoreMode::Resume)),
+            (None, Some(s)) => Some((s, RestoreMode::StartFrom)),
+            (None, None) => None,
+        };
+        let restore_field = if resume.is_some() {
+            "name"
+        } else {
+            "start_from"
+        };
+
         // Grains.
         let mut grains: Vec<GrainInit> = Vec::new();
-        for (k, g) in f.grains.iter().enumerate() {
+        if let Some((state, mode)) = restore {
+            if state.dimension != f.dimension {
+                return Err(cx.err(
+                    restore_field,
+                    format!(
+                        "a state of a {}-D scene (the state is {}-D)",
+                        f.dimension, state.dimension
+                    ),
+                ));
+            }
+            if mode == RestoreMode::Resume && state.scene != f.name {
+                return Err(cx.err(
+                    "name",
+                    format!(
+                        "the scene that saved the state to resume (`{}`), found `{}`",
+                        state.scene, f.name
+                    ),
+                ));
+            }
+            for (i, g) in state.grains.iter().enumerate() {
+                let material = material_id(&g.material, restore_field).map_err(|_| {
+                    cx.err(
+                        restore_field,
+                        format!(
+                            "a state whose materials the scene defines: grain {i} of the state is of material `{}`",
+                            g.material
+                        ),
+                    )
+                })?;
+                let finite = g.position.is_finite()
+                    && g.velocity.is_finite()
+                    && g.angular_velocity.is_finite()
+                    && g.force.is_finite()
+                    && g.torque.is_finite();
+                if !(finite && positive(g.radius) && positive(g.mass) && positive(g.inertia)) {
+                    return Err(cx.err(
+                        restore_field,
+                        format!("a state with finite positions, velocities and forces and positive radii, masses and inertias: grain {i} is not"),
+                    ));
+                }
+                let volume = mass_and_inertia(dimension, g.radius, 1.0).0;
+                grains.push(GrainInit {
+                    position: g.position,
+                    radius: g.radius,
+                    velocity: g.velocity,
+                    angular_velocity: g.angular_velocity,
+                    material,
+                    source: RESTORED_SOURCE,
+                    density: Some(g.mass / volume),
+                    frozen: g.frozen,
+                    saved: Some(i as u32),
+                });
+            }
+        }
+        let resuming = matches!(restore, Some((_, RestoreMode::Resume)));
+        // A resumed run's grains are all in the state: the sources made them already.
+        for (k, g) in f.grains.iter().enumerate().filter(|_| !resuming) {
             let field = |s: &str| format!("grains[{k}].{s}");
             let material = match g {
                 GrainSource::List {
@@ -544,7 +676,23 @@ impl Scene {
         if grains.is_empty() {
             return Err(cx.err("grains", "at least one grain"));
         }
-        let periodic = match &f.periodic {
+        // A saved periodic box (which a compression may have changed) replaces the
+        // scene's extents along the axes both make periodic.
+        let periodic_spec = f.periodic.as_ref().map(|spec| {
+            let mut spec = spec.clone();
+            if let Some(saved) = restore.and_then(|(s, _)| s.periodic) {
+                for (a, extent) in [&mut spec.x, &mut spec.y, &mut spec.z]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if extent.is_some() && saved.axes[a] {
+                        *extent = Some((saved.lo[a], saved.hi[a]));
+                    }
+                }
+            }
+            spec
+        });
+        let periodic = match &periodic_spec {
             Some(spec) => Some(check_periodic(&cx, spec, &grains, two_d)?),
             None => None,
         };
@@ -759,6 +907,22 @@ impl Scene {
                 ));
             }
         };
+        // A resumed run keeps the step it was saved with, to the bit.
+        let (dt, time_step_reason) = match restore {
+            Some((state, RestoreMode::Resume)) => {
+                if !(positive(state.time_step)) {
+                    return Err(cx.err("time_step", "a state with a positive time step"));
+                }
+                (
+                    state.time_step,
+                    format!(
+                        "resumed from a saved state at step {} ({:.4e} s; the scene would choose {dt:.4e} s: {time_step_reason})",
+                        state.step, state.time_step
+                    ),
+                )
+            }
+            _ => (dt, time_step_reason),
+        };
         let steps = match (f.steps, f.duration) {
             (Some(n), _) => n,
             (None, Some(d)) => (d / dt).ceil() as u64,
@@ -896,26 +1060,70 @@ impl Scene {
             .with_angular_velocity(g.angular_velocity)
         };
         let frozen_count = grains.iter().filter(|g| g.frozen).count();
-        builder.world.spawn_batch(
-            grains
-                .iter()
-                .filter(|g| !g.frozen)
-                .map(bundle)
-                .collect::<Vec<_>>(),
-        );
-        if frozen_count > 0 {
+        if let Some((state, mode)) = restore {
+            // One by one in the saved order, so that the grains keep their dense order
+            // (frozen ones go to their own table, as they did in the saving run).
+            let mut saved_entities = vec![Entity::PLACEHOLDER; state.grains.len()];
+            for g in &grains {
+                let mut b = bundle(g);
+                if let Some(i) = g.saved {
+                    let s = &state.grains[i as usize];
+                    b.mass = Mass(s.mass);
+                    b.inertia = MomentOfInertia(s.inertia);
+                    if mode == RestoreMode::Resume {
+                        b.force = Force(s.force);
+                        b.torque = Torque(s.torque);
+                    }
+                }
+                let e = if g.frozen {
+                    builder.world.spawn((b, Frozen)).id()
+                } else {
+                    builder.world.spawn(b).id()
+                };
+                if let Some(i) = g.saved {
+                    saved_entities[i as usize] = e;
+                }
+            }
+            if mode == RestoreMode::Resume {
+                restore_run(&mut builder.world, state);
+            }
+            let restored =
+                crate::state::restore_contacts(&mut builder.world, state, &saved_entities)
+                    .map_err(|e| cx.err(restore_field, format!("a consistent state: {e}")))?;
+            builder.note(format!(
+                "{} saved state (step {} of scene `{}`): {} grains, {} contacts with their history",
+                match mode {
+                    RestoreMode::Resume => "resumed from a",
+                    RestoreMode::StartFrom => "started from a",
+                },
+                state.step,
+                state.scene,
+                state.grains.len(),
+                restored
+            ));
+        } else {
             builder.world.spawn_batch(
                 grains
                     .iter()
-                    .filter(|g| g.frozen)
-                    .map(|g| (bundle(g), Frozen))
+                    .filter(|g| !g.frozen)
+                    .map(bundle)
                     .collect::<Vec<_>>(),
             );
-            builder.note(format!(
-                "frozen grains: {frozen_count} (in contacts, never moved)"
-            ));
+            if frozen_count > 0 {
+                builder.world.spawn_batch(
+                    grains
+                        .iter()
+                        .filter(|g| g.frozen)
+                        .map(|g| (bundle(g), Frozen))
+                        .collect::<Vec<_>>(),
+                );
+                builder.note(format!(
+                    "frozen grains: {frozen_count} (in contacts, never moved)"
+                ));
+            }
         }
         Ok(BuiltScene {
+            resumed: resuming,
             builder,
             name: f.name.clone(),
             stop: StopCondition {
@@ -1212,6 +1420,7 @@ impl Scene {
                 source: k,
                 density: Some(a.density),
                 frozen,
+                saved: None,
             });
         }
         Ok(out)
@@ -1288,6 +1497,9 @@ fn check_overlaps_across_seams(
     let band: Vec<&GrainInit> = grains.iter().filter(|g| near_face(g.position)).collect();
     for (i, g) in band.iter().enumerate() {
         for h in &band[i + 1..] {
+            if g.saved.is_some() && h.saved.is_some() {
+                continue; // both from a saved state, where they touch by right
+            }
             let plain = g.position - h.position;
             let image = b.min_image(plain);
             if image == plain {
@@ -1314,7 +1526,7 @@ fn check_initial_overlaps(
     walls: &[(usize, WallBundle)],
     tolerance: f64,
 ) -> Result<(), SceneError> {
-    for g in grains {
+    for g in grains.iter().filter(|g| g.saved.is_none()) {
         for (k, w) in walls {
             let overlap = g.radius - (g.position - w.wall.point).dot(w.wall.normal);
             if overlap > tolerance * g.radius {
@@ -1370,6 +1582,9 @@ fn check_initial_overlaps(
                             continue;
                         }
                         let h = &grains[j];
+                        if g.saved.is_some() && h.saved.is_some() {
+                            continue; // both from a saved state, where they touch by right
+                        }
                         let overlap = g.radius + h.radius - g.position.distance(h.position);
                         if overlap > tolerance * g.radius.min(h.radius) {
                             let field = format!("grains[{}]", h.source);

@@ -25,7 +25,13 @@ pub struct GrainInit {
     pub density: Option<f64>,
     /// A frozen grain never moves.
     pub frozen: bool,
+    /// Index of the grain in a saved state it was restored from (`source` is then
+    /// [`RESTORED_SOURCE`]); its mass, inertia, force and torque come from the state.
+    pub saved: Option<u32>,
 }
+
+/// The `source` of grains restored from a saved state (not a `grains` entry).
+pub const RESTORED_SOURCE: usize = usize::MAX;
 
 /// Why a source could not produce its grains: (field relative to the source, expected).
 pub type GenerateError = (String, String);
@@ -58,6 +64,7 @@ pub fn generate(
                 source: index,
                 density: None,
                 frozen: false,
+                saved: None,
             })
             .collect()),
         GrainSource::Lattice {
@@ -99,6 +106,7 @@ pub fn generate(
                             source: index,
                             density: None,
                             frozen: false,
+                            saved: None,
                         });
                     }
                 }
@@ -129,6 +137,7 @@ pub fn generate(
                         source: index,
                         density: None,
                         frozen: false,
+                        saved: None,
                     })
                     .collect()
             })

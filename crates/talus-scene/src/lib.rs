@@ -13,6 +13,7 @@ pub mod generate;
 pub mod lammps;
 pub mod locate;
 pub mod schema;
+pub mod state;
 
 pub use build::{BuiltScene, StopCondition};
 pub use error::SceneError;

@@ -64,8 +64,14 @@ pub struct SceneFile {
     /// Walls.
     #[serde(default)]
     pub walls: Vec<WallSpec>,
-    /// Grain sources.
+    /// Grain sources. Default: none (a scene with `start_from` may add no grain).
+    #[serde(default)]
     pub grains: Vec<GrainSource>,
+    /// A saved state (`state.ron` of an earlier run, relative to this file) whose grains
+    /// and contacts, with their histories, the scene starts from, before the grains of
+    /// `grains`. Default: none.
+    #[serde(default)]
+    pub start_from: Option<String>,
     /// Largest initial overlap allowed, as a fraction of the smaller radius. Default: 1e-3.
     #[serde(default = "default_overlap_tolerance")]
     pub initial_overlap_tolerance: f64,
@@ -357,6 +363,10 @@ pub struct OutputSpec {
     /// Simulated time between report samples, s. Default: 0.01.
     #[serde(default = "default_interval")]
     pub report_interval: f64,
+    /// Write the final state (every grain, wall and contact with its history) to
+    /// `state.ron`, for `talus run --resume` or another scene's `start_from`. Default: false.
+    #[serde(default)]
+    pub state: bool,
 }
 
 impl Default for OutputSpec {
@@ -365,6 +375,7 @@ impl Default for OutputSpec {
             recording: true,
             recording_interval: default_interval(),
             report_interval: default_interval(),
+            state: false,
         }
     }
 }

@@ -52,7 +52,7 @@ impl HysteresisLimits {
 }
 
 /// Which branch the element is on.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Branch {
     /// Unloaded, at the origin, no branch yet.
     #[default]
@@ -64,7 +64,7 @@ pub enum Branch {
 }
 
 /// State of one hysteresis spring.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HysteresisState {
     /// Deformation Δ, rad.
     pub deformation: f64,

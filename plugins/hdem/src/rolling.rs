@@ -125,7 +125,7 @@ pub struct HdemParams {
 }
 
 /// Per-contact history of [`HdemRolling`].
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HdemHistory {
     /// The hysteresis spring.
     pub spring: HysteresisState,

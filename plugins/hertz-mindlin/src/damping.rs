@@ -29,7 +29,7 @@ pub struct HertzDampingParams {
 }
 
 /// History of [`HertzDamping`]: its force at the previous evaluation (trapezoidal work).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HertzDampingHistory {
     /// Dashpot force of the previous evaluation, N.
     pub force: DVec3,

@@ -23,7 +23,7 @@ pub struct HertzNormalParams {
 
 /// History of [`HertzNormal`]: what the previous evaluation stored, for the trapezoidal
 /// work of the spring and the change of its potential.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HertzNormalHistory {
     /// Elastic force F_n n of the previous evaluation, N.
     pub force: DVec3,

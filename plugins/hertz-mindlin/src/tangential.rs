@@ -35,7 +35,7 @@ pub struct MindlinParams {
 }
 
 /// History of [`MindlinTangential`].
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MindlinHistory {
     /// Tangential spring force on `a` after the previous evaluation, N.
     pub spring: DVec3,

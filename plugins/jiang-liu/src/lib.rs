@@ -179,7 +179,7 @@ pub fn yield_projection(p: &JiangLiuParams, u_n: f64, u_t: DVec3) -> DVec3 {
 
 /// Per-contact state: the spring, the relaxation buffer, and what the energy accounting
 /// of the next step needs.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct JiangLiuState {
     /// Normal spring displacement u_n, m (negative in compression).
     pub normal_displacement: f64,

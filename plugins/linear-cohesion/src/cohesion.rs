@@ -76,7 +76,7 @@ impl CohesionParams {
 
 /// History of [`LinearCohesion`]: its force at the previous evaluation, for the
 /// trapezoidal work over the step and the potential it held.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CohesionHistory {
     /// Cohesive force on body `a` at the previous evaluation, N (zero for a new contact).
     pub force: DVec3,

@@ -64,7 +64,7 @@ pub struct LinearParams {
 
 /// Per-contact history: the tangential spring, and the dashpot forces of the previous
 /// step (for the trapezoidal work of the dashpots, the rule velocity Verlet follows).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TangentialSpring {
     /// Tangential spring displacement ξ, m.
     pub spring: DVec3,

@@ -13,7 +13,7 @@ use crate::{LinearSpringLaw, NormalDamping, PARAMS, rotate_into_plane};
 pub struct LinearNormal;
 
 /// History of [`LinearNormal`]: the spring force of the previous evaluation.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct NormalSpringHistory {
     /// k_n δ n of the previous evaluation, N.
     pub spring: DVec3,
@@ -74,7 +74,7 @@ impl SubModel for LinearNormal {
 pub struct LinearDashpot;
 
 /// History of a dashpot: its force at the previous evaluation (trapezoidal work).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DashpotHistory {
     /// Dashpot force of the previous evaluation, N.
     pub force: DVec3,
@@ -139,7 +139,7 @@ pub struct CoulombParams {
 }
 
 /// History of [`CoulombSpring`].
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CoulombHistory {
     /// Tangential spring displacement ξ, m.
     pub spring: DVec3,

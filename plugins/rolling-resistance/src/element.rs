@@ -86,7 +86,7 @@ pub fn normal_frequency<N: SubModel>(pair: &PairAssignment) -> Option<f64> {
 }
 
 /// Per-contact history of a [`TorqueSpringLaw`] element.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TorqueSpringHistory {
     /// Spring torque on body `a` after the last evaluation, N m.
     pub spring: DVec3,

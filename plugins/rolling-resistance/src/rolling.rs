@@ -99,7 +99,7 @@ fn required(field: &str, what: &str, part: &str) -> ParamError {
 
 /// Per-contact history of a part whose torque has no spring: the torque of the last
 /// evaluation, for the trapezoidal work of the step.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TorqueHistory {
     /// Torque on `a` of the last evaluation, N m.
     pub torque: DVec3,
