@@ -673,6 +673,74 @@ impl Scene {
                 .map_err(|(sub, expected)| cx.err(&field(&sub), expected))?;
             grains.extend(made);
         }
+        // Sequential deposition: its first batch is part of the initial grains (a
+        // resumed run has its batches in the state already).
+        let mut deposition = None;
+        if let Some(d) = &f.deposition {
+            let field = |s: &str| format!("deposition.{s}");
+            let mat = material_id(&d.material, &field("material"))?;
+            check_region(&cx, &d.region, &field("region"), two_d)?;
+            match d.radius {
+                RadiusSpec::Fixed(r) if !positive(r) => {
+                    return Err(cx.err(&field("radius"), "a positive radius in metres"));
+                }
+                RadiusSpec::Uniform { min, max } if !(positive(min) && positive(max) && min <= max) => {
+                    return Err(cx.err(&field("radius"), "radii with 0 < min ≤ max"));
+                }
+                _ => {}
+            }
+            if d.batch_size == 0 || d.batches == 0 {
+                return Err(cx.err(
+                    &field(if d.batch_size == 0 { "batch_size" } else { "batches" }),
+                    "at least one",
+                ));
+            }
+            if !positive(d.settle_kinetic_energy) {
+                return Err(cx.err(&field("settle_kinetic_energy"), "a positive energy in joules"));
+            }
+            if !positive(d.unbalanced_force) {
+                return Err(cx.err(&field("unbalanced_force"), "a positive ratio"));
+            }
+            if d.check_interval.is_some_and(|t| !positive(t)) {
+                return Err(cx.err(&field("check_interval"), "a positive interval in seconds"));
+            }
+            if f.integrator == IntegratorName::Gear {
+                return Err(cx.err(
+                    "integrator",
+                    "VelocityVerlet or SymplecticEuler with `deposition` (Gear keeps per-grain derivatives in grain order, which inserted grains would shift)",
+                ));
+            }
+            let progress = match restore {
+                Some((state, RestoreMode::Resume)) => state.deposition.unwrap_or_default(),
+                _ => {
+                    let existing: Vec<(DVec3, f64)> =
+                        grains.iter().map(|g| (g.position, g.radius)).collect();
+                    let batch = crate::generate::random_insertion(
+                        &d.region,
+                        d.batch_size,
+                        &d.radius,
+                        d.seed,
+                        0.0,
+                        two_d,
+                        &existing,
+                    )
+                    .map_err(|(sub, expected)| cx.err(&field(if sub == "count" { "batch_size" } else { &sub }), expected))?;
+                    grains.extend(batch.into_iter().map(|(p, r, _)| GrainInit {
+                        position: p,
+                        radius: r,
+                        velocity: DVec3::ZERO,
+                        angular_velocity: DVec3::ZERO,
+                        material: mat,
+                        source: RESTORED_SOURCE - 1,
+                        density: None,
+                        frozen: false,
+                        saved: None,
+                    }));
+                    crate::packing::DepositionProgress { batches_inserted: 1 }
+                }
+            };
+            deposition = Some((mat, progress));
+        }
         if grains.is_empty() {
             return Err(cx.err("grains", "at least one grain"));
         }
@@ -1027,6 +1095,94 @@ impl Scene {
             grains.len(),
             walls.len()
         ));
+        if let (Some(d), Some((mat, progress))) = (&f.deposition, deposition) {
+            let interval = d.check_interval.unwrap_or(f.output.report_interval);
+            let density = builder.world.resource::<Materials>().0[mat as usize].density;
+            builder.world.insert_resource(crate::packing::Deposition {
+                region: d.region.clone(),
+                radius: d.radius.clone(),
+                batch_size: d.batch_size,
+                batches: d.batches,
+                seed: d.seed,
+                settle_kinetic_energy: d.settle_kinetic_energy,
+                unbalanced_force: d.unbalanced_force,
+                check_every: ((interval / dt).round() as u64).max(1),
+                material: MaterialId(mat),
+                density,
+                progress,
+            });
+            builder.add_system(Stage::Sample, "deposition", crate::packing::deposition);
+            builder.note(format!(
+                "deposition: {} batches of {} grains, each once the last has settled (mean kinetic energy < {:.3e} J per grain and unbalanced-force ratio < {:.3e})",
+                d.batches, d.batch_size, d.settle_kinetic_energy, d.unbalanced_force
+            ));
+        }
+        if let Some(c) = &f.compression {
+            let axes = if two_d { 2 } else { 3 };
+            let Some(cell) = &periodic else {
+                return Err(cx.err("compression", "a scene periodic along every axis (`periodic`)"));
+            };
+            if (0..axes).any(|a| !cell.axes[a]) {
+                return Err(cx.err(
+                    "periodic",
+                    format!("periodic boundaries along every axis ({}) for `compression`", if two_d { "x and y" } else { "x, y and z" }),
+                ));
+            }
+            if gravity != DVec3::ZERO {
+                return Err(cx.err("gravity", "no gravity with an isotropic `compression`"));
+            }
+            if f.integrator == IntegratorName::Gear {
+                return Err(cx.err("integrator", "VelocityVerlet or SymplecticEuler with `compression`"));
+            }
+            let target = match (c.target_solid_fraction, c.target_pressure) {
+                (Some(phi), None) if phi > 0.0 && phi < 1.0 => crate::packing::CompressionTarget::SolidFraction(phi),
+                (None, Some(p)) if positive(p) => crate::packing::CompressionTarget::Pressure(p),
+                (Some(_), None) => return Err(cx.err("compression.target_solid_fraction", "a solid fraction in (0, 1)")),
+                (None, Some(_)) => return Err(cx.err("compression.target_pressure", "a positive pressure in Pa")),
+                _ => return Err(cx.err("compression", "exactly one of `target_solid_fraction` and `target_pressure`")),
+            };
+            for (name, v) in [
+                ("max_strain_rate", c.max_strain_rate),
+                ("max_inertial_number", c.max_inertial_number),
+                ("unbalanced_force", c.unbalanced_force),
+                ("pressure_tolerance", c.pressure_tolerance),
+            ] {
+                if !positive(v) {
+                    return Err(cx.err(&format!("compression.{name}"), "a positive number"));
+                }
+            }
+            let densities = &builder.world.resource::<Materials>().0;
+            let n = grains.len() as f64;
+            let grain_volume: f64 = grains
+                .iter()
+                .map(|g| mass_and_inertia(dimension, g.radius, 1.0).0)
+                .sum();
+            let mean_diameter = grains.iter().map(|g| 2.0 * g.radius).sum::<f64>() / n;
+            let density = grains
+                .iter()
+                .map(|g| g.density.unwrap_or(densities[g.material as usize].density))
+                .sum::<f64>()
+                / n;
+            builder.world.insert_resource(crate::packing::Compression {
+                target,
+                max_strain_rate: c.max_strain_rate,
+                max_inertial_number: c.max_inertial_number,
+                unbalanced_force: c.unbalanced_force,
+                pressure_tolerance: c.pressure_tolerance,
+                grain_volume,
+                mean_diameter,
+                density,
+                check_every: ((f.output.report_interval / dt).round() as u64).clamp(1, 100),
+                dims: axes,
+                strain_rate: 0.0,
+                pressure: 0.0,
+            });
+            builder.add_system(Stage::Prepare, "isotropic_compression", crate::packing::compression);
+            builder.note(format!(
+                "isotropic compression of the periodic cell to {target:?}, inertial number ≤ {:.1e}, strain rate ≤ {:.3e} 1/s; stops at unbalanced-force ratio < {:.1e}",
+                c.max_inertial_number, c.max_strain_rate, c.unbalanced_force
+            ));
+        }
         if !servos.is_empty() {
             builder.add_system(
                 Stage::Prepare,

@@ -125,7 +125,7 @@ pub fn generate(
             velocity_spread,
             ..
         } => {
-            random_insertion(region, *count, radius, *seed, *velocity_spread, two_d).map(|grains| {
+            random_insertion(region, *count, radius, *seed, *velocity_spread, two_d, &[]).map(|grains| {
                 grains
                     .into_iter()
                     .map(|(p, r, vel)| GrainInit {
@@ -145,13 +145,16 @@ pub fn generate(
     }
 }
 
-fn random_insertion(
+/// Random sequential insertion of `count` grains (centre, radius, velocity) in a
+/// region, overlapping neither each other nor the `existing` grains (centre, radius).
+pub fn random_insertion(
     region: &Region,
     count: usize,
     radius: &RadiusSpec,
     seed: u64,
     spread: f64,
     two_d: bool,
+    existing: &[(DVec3, f64)],
 ) -> Result<Vec<(DVec3, f64, DVec3)>, GenerateError> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (rmin, rmax) = match *radius {
@@ -180,6 +183,17 @@ fn random_insertion(
         (c(q.x, nx), c(q.y, ny), if two_d { 0 } else { c(q.z, nz) })
     };
     let mut out: Vec<(DVec3, f64, DVec3)> = Vec::with_capacity(count);
+    // Existing grains that reach into the region take part in the overlap tests (as
+    // entries past `count` in `placed`), without being returned.
+    let mut placed: Vec<(DVec3, f64)> = Vec::new();
+    for &(q, rq) in existing {
+        let reach = rq + rmax;
+        if (0..3).all(|d| (two_d && d == 2) || (q[d] > lo[d] - reach && q[d] < hi[d] + reach)) {
+            let (bx, by, bz) = bin_of(q);
+            bins[bx + nx * (by + ny * bz)].push(u32::MAX - placed.len() as u32);
+            placed.push((q, rq));
+        }
+    }
     let max_attempts = 1000 * count as u64 + 10_000;
     let mut attempts = 0u64;
     while out.len() < count {
@@ -218,7 +232,12 @@ fn random_insertion(
             for y in by.saturating_sub(1)..=(by + 1).min(ny - 1) {
                 for x in bx.saturating_sub(1)..=(bx + 1).min(nx - 1) {
                     for &k in &bins[x + nx * (y + ny * z)] {
-                        let (q, rq, _) = out[k as usize];
+                        let (q, rq) = if k as usize >= count.max(out.len()) {
+                            placed[(u32::MAX - k) as usize]
+                        } else {
+                            let (q, rq, _) = out[k as usize];
+                            (q, rq)
+                        };
                         if p.distance_squared(q) < (r + rq) * (r + rq) {
                             free = false;
                             break 'search;

@@ -12,6 +12,7 @@ pub mod error;
 pub mod generate;
 pub mod lammps;
 pub mod locate;
+pub mod packing;
 pub mod schema;
 pub mod state;
 

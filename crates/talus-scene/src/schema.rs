@@ -87,6 +87,85 @@ pub struct SceneFile {
     /// Periodic boundaries: the axes that wrap around and their extent. Default: none.
     #[serde(default)]
     pub periodic: Option<PeriodicSpec>,
+    /// Packing by sequential deposition: batches of grains dropped into the container,
+    /// each once the last has settled. Default: none.
+    #[serde(default)]
+    pub deposition: Option<DepositionSpec>,
+    /// Packing by isotropic compression of the periodic cell. Default: none.
+    #[serde(default)]
+    pub compression: Option<CompressionSpec>,
+}
+
+/// Sequential deposition: `deposition: (material: "glass", region: (...), radius:
+/// Uniform(min: .., max: ..), batch_size: 200, batches: 5, settle_kinetic_energy: 1e-9,
+/// unbalanced_force: 1e-2)`. A batch is inserted (random sequential insertion in
+/// `region`, clear of every grain) at the start and whenever the grains have settled:
+/// mean kinetic energy per grain and unbalanced-force ratio both below their thresholds.
+/// The run stops once the last batch has settled.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DepositionSpec {
+    /// Material of the deposited grains.
+    pub material: String,
+    /// Insertion region (above the container), m.
+    pub region: Region,
+    /// Radius distribution.
+    pub radius: RadiusSpec,
+    /// Grains per batch.
+    pub batch_size: usize,
+    /// Number of batches.
+    pub batches: usize,
+    /// Random seed (batch k uses seed + k). Default: 0.
+    #[serde(default)]
+    pub seed: u64,
+    /// Settled when the mean kinetic energy per grain is below this, J.
+    pub settle_kinetic_energy: f64,
+    /// ... and the unbalanced-force ratio is below this.
+    pub unbalanced_force: f64,
+    /// Simulated time between settling checks, s. Default: `output.report_interval`.
+    #[serde(default)]
+    pub check_interval: Option<f64>,
+}
+
+/// Isotropic compression of a periodic cell: `compression: (target_solid_fraction: 0.62,
+/// max_strain_rate: 10.0, max_inertial_number: 1e-3, unbalanced_force: 1e-4)`. The cell
+/// shrinks homothetically (grain centres scaled with it) at the largest strain rate that
+/// keeps the inertial number I = ε̇ d̄ √(ρ/p) below the bound, until the target is met;
+/// then it holds and the run stops once the unbalanced-force ratio is below its bound.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompressionSpec {
+    /// Target solid fraction (grain volume / cell volume; 2-D: areas). Give this or
+    /// `target_pressure`.
+    #[serde(default)]
+    pub target_solid_fraction: Option<f64>,
+    /// Target mean pressure p = −tr σ / D from the contact (Love–Weber) stress, Pa.
+    #[serde(default)]
+    pub target_pressure: Option<f64>,
+    /// Largest strain rate, 1/s (used while the pressure is too low to bound it).
+    pub max_strain_rate: f64,
+    /// Bound on the inertial number. Default: 1e-3 (quasi-static).
+    #[serde(default = "default_max_inertial_number")]
+    pub max_inertial_number: f64,
+    /// Stop once the target is met and the unbalanced-force ratio is below this.
+    /// Default: 1e-4.
+    #[serde(default = "default_unbalanced_force")]
+    pub unbalanced_force: f64,
+    /// Relative tolerance on the target pressure. Default: 0.01.
+    #[serde(default = "default_pressure_tolerance")]
+    pub pressure_tolerance: f64,
+}
+
+fn default_max_inertial_number() -> f64 {
+    1e-3
+}
+
+fn default_unbalanced_force() -> f64 {
+    1e-4
+}
+
+fn default_pressure_tolerance() -> f64 {
+    0.01
 }
 
 /// Integration scheme names.

@@ -143,6 +143,9 @@ pub struct SavedState {
     pub energy: EnergySnapshot,
     /// The Gear integrator's derivatives, when it is the integrator.
     pub gear: Option<GearHistory>,
+    /// How far a sequential deposition has got, when the scene deposits.
+    #[serde(default)]
+    pub deposition: Option<crate::packing::DepositionProgress>,
 }
 
 impl SavedState {
@@ -252,6 +255,9 @@ impl SavedState {
             contacts,
             ledger: world.resource::<EnergyLedger>().clone(),
             energy: world.resource::<EnergySnapshot>().clone(),
+            deposition: world
+                .get_resource::<crate::packing::Deposition>()
+                .map(|d| d.progress),
             gear: match config.integrator {
                 Integrator::Gear => world.get_resource::<GearHistory>().cloned(),
                 _ => None,

@@ -1,0 +1,176 @@
+//! Packing generation: isotropic compression of a periodic cell to a target solid
+//! fraction at a bounded inertial number, and sequential deposition in batches; each
+//! checked against what a packing in static equilibrium must satisfy.
+
+mod common;
+
+use bevy_ecs::prelude::*;
+use talus::core::prelude::*;
+use talus::core::resources::StopRequest;
+use talus::core::schedule::Simulation;
+use talus::scene::packing::{Compression, Deposition};
+use talus::scene::state::SavedState;
+
+fn build(text: &str, resume: Option<&SavedState>) -> Simulation {
+    let scene = talus::scene::parse("packing.ron", text).unwrap_or_else(|e| panic!("{e}"));
+    let built = match resume {
+        Some(s) => scene.resume(&talus::registry(), s),
+        None => scene.build(&talus::registry()),
+    }
+    .unwrap_or_else(|e| panic!("{e}"));
+    let resumed = built.resumed;
+    let mut sim = built.builder.build();
+    if resumed {
+        sim.mark_primed();
+    }
+    sim
+}
+
+/// Steps until the protocol asks to stop (or `limit` steps); returns the reason.
+fn run_until_stop(sim: &mut Simulation, limit: u64) -> Option<String> {
+    for _ in 0..limit {
+        sim.step().unwrap_or_else(|b| panic!("blow-up: {}", b.reason));
+        if let Some(r) = sim.world.resource::<StopRequest>().0.clone() {
+            return Some(r);
+        }
+    }
+    None
+}
+
+const COMPRESSION: &str = r#"Scene(
+    name: "iso-compression",
+    steps: 2000000,
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 1e4, restitution: 0.3, friction: 0.0))],
+    periodic: (x: (0.0, 0.018), y: (0.0, 0.018), z: (0.0, 0.018)),
+    grains: [Random(material: "glass", region: (min: (0.0, 0.0, 0.0), max: (0.018, 0.018, 0.018)),
+        count: 250, radius: Uniform(min: 0.0009, max: 0.0011), seed: 5, velocity_spread: 0.0)],
+    compression: (target_solid_fraction: 0.655, max_strain_rate: 20.0, max_inertial_number: 1e-3,
+        unbalanced_force: 1e-4),
+    output: (recording: false, report_interval: 1e-4),
+)"#;
+
+#[test]
+fn isotropic_compression_reaches_the_target_solid_fraction_in_equilibrium() {
+    let mut sim = build(COMPRESSION, None);
+    sim.prime().unwrap();
+    let mut largest_inertial_number: f64 = 0.0;
+    let mut reason = None;
+    let mut steps = 0u64;
+    while steps < 2_000_000 {
+        sim.step().unwrap_or_else(|b| panic!("blow-up: {}", b.reason));
+        steps += 1;
+        // The inertial number the compression ran at, from its own strain rate and the
+        // pressure it measured (while it compresses under a real pressure).
+        let c = sim.world.resource::<Compression>();
+        if c.strain_rate > 0.0 && c.pressure > 0.0 && c.strain_rate < c.max_strain_rate {
+            let i = c.strain_rate * c.mean_diameter * (c.density / c.pressure).sqrt();
+            largest_inertial_number = largest_inertial_number.max(i);
+        }
+        if let Some(r) = sim.world.resource::<StopRequest>().0.clone() {
+            reason = Some(r);
+            break;
+        }
+    }
+    let reason = reason.expect("the compression ends");
+    eprintln!("{reason} after {steps} steps");
+    // Solid fraction from the grains and the cell, computed here.
+    let cell = *sim.world.resource::<PeriodicBox>();
+    let l = cell.length();
+    let mut q = sim.world.query_filtered::<&Radius, With<Grain>>();
+    let grain_volume: f64 = q
+        .iter(&sim.world)
+        .map(|r| 4.0 / 3.0 * std::f64::consts::PI * r.0.powi(3))
+        .sum();
+    let phi = grain_volume / (l.x * l.y * l.z);
+    assert!(
+        (phi - 0.655).abs() <= 0.005 * 0.655,
+        "solid fraction {phi} against 0.655"
+    );
+    let ratio = talus::contact::unbalanced_force_ratio(&mut sim.world).expect("contacts");
+    assert!(ratio < 1e-4, "unbalanced-force ratio {ratio:e}");
+    // A jammed packing: it carries a pressure, with more than one contact per grain.
+    let contacts = sim.world.resource::<EnergySnapshot>().contacts;
+    assert!(contacts > 250, "{contacts} contacts");
+    assert!(
+        largest_inertial_number <= 1e-3 * (1.0 + 1e-9),
+        "inertial number reached {largest_inertial_number:e}"
+    );
+}
+
+fn deposition(steps: u64) -> String {
+    format!(
+        r#"Scene(
+    name: "deposition",
+    gravity: (0.0, 0.0, -9.81),
+    steps: {steps},
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 2000.0, restitution: 0.3, friction: 0.4))],
+    walls: [Box(min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.05), material: "glass", omit: ["z_max"])],
+    grains: [],
+    deposition: (material: "glass", region: (min: (0.0, 0.0, 0.02), max: (0.02, 0.02, 0.035)),
+        radius: Uniform(min: 0.0012, max: 0.0016), batch_size: 40, batches: 3, seed: 9,
+        settle_kinetic_energy: 1e-10, unbalanced_force: 1e-2, check_interval: 0.002),
+    output: (recording: false, report_interval: 0.002),
+)"#
+    )
+}
+
+#[test]
+fn sequential_deposition_settles_every_batch_and_the_floor_carries_the_weight() {
+    let mut sim = build(&deposition(3_000_000), None);
+    sim.prime().unwrap();
+    let reason = run_until_stop(&mut sim, 3_000_000).expect("the deposition ends");
+    eprintln!("{reason} at step {}", sim.step_count());
+    assert!(reason.starts_with("deposited"), "{reason}");
+    let mut q = sim.world.query_filtered::<(&Position, &Mass), With<Grain>>();
+    let grains: Vec<(DVec3, f64)> = q.iter(&sim.world).map(|(p, m)| (p.0, m.0)).collect();
+    assert_eq!(grains.len(), 120, "three batches of 40");
+    assert_eq!(sim.world.resource::<Deposition>().progress.batches_inserted, 3);
+    assert!(grains.iter().all(|(p, _)| p.z < 0.02), "all grains fell into the box");
+    // Static equilibrium: the floor carries the whole weight (friction on the side walls
+    // can carry a share, so the floor takes at most the weight and most of it).
+    let weight: f64 = grains.iter().map(|(_, m)| m * 9.81).sum();
+    let mut walls = sim.world.query::<(&Wall, &WallLoad)>();
+    let mut vertical = 0.0;
+    for (w, l) in walls.iter(&sim.world) {
+        vertical += l.0.z;
+        if w.name == "z_min" {
+            assert!(l.0.z < 0.0, "the floor is pushed down");
+        }
+    }
+    // The walls together carry the weight (vertical loads sum to −weight) to the
+    // unbalanced-force level.
+    assert!(
+        (vertical + weight).abs() < 2e-2 * weight,
+        "walls carry {} N of a weight of {weight} N",
+        -vertical
+    );
+}
+
+/// A deposition saved between batches and resumed inserts the same next batches and
+/// ends in the same packing, bit for bit.
+#[test]
+fn a_deposition_resumed_between_batches_is_bit_identical() {
+    let total = 60_000;
+    let mut whole = build(&deposition(total), None);
+    whole.prime().unwrap();
+    whole.run_steps(total).unwrap();
+    let mut first = build(&deposition(total), None);
+    first.prime().unwrap();
+    // Run until the second batch is in, then a little more.
+    while first.world.resource::<Deposition>().progress.batches_inserted < 2 {
+        first.step().unwrap();
+        assert!(first.step_count() < total / 2, "second batch too late for this test");
+    }
+    first.run_steps(777).unwrap();
+    let split = first.step_count();
+    let saved = SavedState::capture(&mut first.world, "deposition");
+    assert_eq!(saved.deposition.unwrap().batches_inserted, 2);
+    let mut second = build(&deposition(total), Some(&saved));
+    second.run_steps(total - split).unwrap();
+    let text = |sim: &mut Simulation| ron::to_string(&SavedState::capture(&mut sim.world, "d")).unwrap();
+    assert!(text(&mut whole) == text(&mut second));
+}
