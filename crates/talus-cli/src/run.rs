@@ -327,6 +327,7 @@ pub fn run_scene(
             .map_err(RunError::Output)?;
     }
     write_json(&report_path, &report)?;
+    write_fields(&sim.world, &out_dir)?;
     if let Some(message) = blow_message {
         return Err(RunError::BlowUp {
             message,
@@ -361,6 +362,25 @@ fn describe_body(world: &World, e: Entity) -> String {
         _ => format!("entity {}", e.to_bits()),
     }
 }
+
+/// Writes the last coarse-grained field sample to `fields.json` (compact: a field is
+/// large), when the scene samples fields (`docs/report-format.md` §3.3).
+fn write_fields(world: &World, out_dir: &Path) -> Result<(), RunError> {
+    let Some(fields) = world
+        .get_resource::<talus_stress::FieldRecord>()
+        .and_then(|r| r.latest.as_ref())
+    else {
+        return Ok(());
+    };
+    let path = out_dir.join(FIELDS_FILE);
+    let text = serde_json::to_string(fields)
+        .map_err(|e| RunError::Output(format!("cannot encode {}: {e}", path.display())))?;
+    std::fs::write(&path, text)
+        .map_err(|e| RunError::Output(format!("cannot write {}: {e}", path.display())))
+}
+
+/// Name of the file holding the last coarse-grained field sample, in the output folder.
+pub const FIELDS_FILE: &str = "fields.json";
 
 fn write_json(path: &Path, value: &impl Serialize) -> Result<(), RunError> {
     let text = serde_json::to_string_pretty(value)

@@ -1,12 +1,13 @@
 //! The export system: logs grains, force chains, walls and energy statistics of one
-//! step into the recording, and each new stress sample as scalars under `stress/`.
+//! step into the recording, each new stress sample as scalars under `stress/`, and each
+//! new coarse-grained field sample as point clouds under `fields/`.
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rerun::{EntityPath, EntityPathPart};
 use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind};
 use talus_core::prelude::*;
-use talus_stress::{RegionStress, StressRecord, StressSample};
+use talus_stress::{FieldRecord, FieldSample, RegionStress, StressRecord, StressSample};
 
 use crate::{
     FORCE_CHAINS_PATH, GRAINS_PATH, RerunRecorder, STATS_PATH, STEP_TIMELINE, TIME_TIMELINE,
@@ -15,6 +16,12 @@ use crate::{
 
 /// Parent entity path of the stress scalars (`stress/<region>/<quantity>`).
 pub const STRESS_PATH: &str = "stress";
+/// Point cloud of the field grid nodes coloured by density.
+pub const FIELD_DENSITY_PATH: &str = "fields/density";
+/// Point cloud of the field grid nodes coloured by pressure.
+pub const FIELD_PRESSURE_PATH: &str = "fields/pressure";
+/// Radius of a field node's point, as a fraction of the smallest cell edge.
+const FIELD_NODE_RADIUS: f64 = 0.25;
 
 /// Smallest force-chain radius, as a fraction of the mean grain radius.
 const MIN_CHAIN_RADIUS: f32 = 0.02;
@@ -50,6 +57,8 @@ pub(crate) struct ExportState {
     stress_paths: Vec<Vec<EntityPath>>,
     /// [`StressRecord::taken`] of the last stress sample logged.
     stress_logged: u64,
+    /// [`FieldRecord::taken`] of the last field sample logged.
+    fields_logged: u64,
 }
 
 /// Scalars logged per stress region, under `stress/<region>/`.
@@ -100,6 +109,7 @@ pub fn rerun_export(
     walls: Query<(Entity, &Wall)>,
     stress: Option<Res<StressRecord>>,
     periodic: Option<Res<PeriodicBox>>,
+    fields: Option<Res<FieldRecord>>,
 ) {
     let Some(mut recorder) = recorder else {
         return;
@@ -116,6 +126,20 @@ pub fn rerun_export(
             && recorder.error.is_none()
         {
             recorder.error = Some(format!("rerun stress export at step {}: {e}", clock.step));
+        }
+    }
+    // Field samples too.
+    if let Some(record) = fields
+        && let Some(sample) = &record.latest
+        && record.taken != recorder.state.fields_logged
+    {
+        let recorder = &mut *recorder;
+        recorder.state.fields_logged = record.taken;
+        let planar = config.dimension == Dimension::Two;
+        if let Err(e) = log_fields(&recorder.stream, &mut recorder.state, sample, planar)
+            && recorder.error.is_none()
+        {
+            recorder.error = Some(format!("rerun field export at step {}: {e}", clock.step));
         }
     }
     if !clock.step.is_multiple_of(recorder.every) {
@@ -421,6 +445,59 @@ fn log_stress(
         }
     }
     Ok(())
+}
+
+/// Logs one field sample as two point clouds over the grid nodes:
+/// [`FIELD_DENSITY_PATH`] coloured by density (blue at 0, red at the largest), and
+/// [`FIELD_PRESSURE_PATH`] coloured by pressure (grey at 0, red in compression, blue in
+/// tension, scaled by the largest |p|).
+fn log_fields(
+    rec: &rerun::RecordingStream,
+    s: &mut ExportState,
+    sample: &FieldSample,
+    planar: bool,
+) -> rerun::RecordingStreamResult<()> {
+    rec.set_time_sequence(STEP_TIMELINE, sample.step as i64);
+    rec.set_duration_secs(TIME_TIMELINE, sample.time);
+    s.positions.clear();
+    s.positions
+        .extend((0..sample.node_count()).map(|n| to_f32(sample.node_position(n))));
+    let axes = if planar { 2 } else { 3 };
+    let edge = sample.cell_size[..axes]
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    let radius = (FIELD_NODE_RADIUS * edge) as f32;
+    let max_density = sample.density.iter().copied().fold(0.0, f64::max);
+    s.colors.clear();
+    s.colors.extend(
+        sample
+            .density
+            .iter()
+            .map(|&rho| ramp(fraction(rho, max_density))),
+    );
+    rec.log(
+        FIELD_DENSITY_PATH,
+        &rerun::Points3D::new(s.positions.iter().copied())
+            .with_radii([radius])
+            .with_colors(s.colors.iter().copied()),
+    )?;
+    let max_pressure = sample.pressure.iter().map(|p| p.abs()).fold(0.0, f64::max);
+    s.colors.clear();
+    s.colors.extend(sample.pressure.iter().map(|&p| {
+        let t = if max_pressure > 0.0 {
+            0.5 + 0.5 * (p / max_pressure).clamp(-1.0, 1.0)
+        } else {
+            0.5
+        };
+        ramp(t)
+    }));
+    rec.log(
+        FIELD_PRESSURE_PATH,
+        &rerun::Points3D::new(s.positions.iter().copied())
+            .with_radii([radius])
+            .with_colors(s.colors.iter().copied()),
+    )
 }
 
 /// Value of entry `k` of [`STRESS_SCALARS`] for a region, if defined.

@@ -11,7 +11,7 @@ use talus_contact::{
     ContactPlugin, LawDescriptor, LawRegistry, PairAssignment, ParamValues, TimeScale, check_params,
 };
 use talus_core::prelude::*;
-use talus_stress::{RegionShape, RegionSpec, StressPlugin};
+use talus_stress::{CoarseGrainingPlugin, FieldSpec, RegionShape, RegionSpec, StressPlugin};
 
 use crate::Scene;
 
@@ -1041,10 +1041,23 @@ impl Scene {
         // Stress sampling only when the scene asks for it: otherwise no system is added.
         if let (Some(spec), Some(regions)) = (&f.sampling, sampling_regions) {
             let interval = spec.interval.unwrap_or(f.output.report_interval);
-            builder.add_plugin(&StressPlugin {
-                every: ((interval / dt).round() as u64).max(1),
-                regions,
-            });
+            if !regions.is_empty() {
+                builder.add_plugin(&StressPlugin {
+                    every: ((interval / dt).round() as u64).max(1),
+                    regions,
+                });
+            }
+            if let Some(fields) = &spec.fields {
+                let (cells, width) = check_fields(&cx, fields, two_d, periodic.as_ref())?;
+                let interval = fields.interval.unwrap_or(interval);
+                builder.add_plugin(&CoarseGrainingPlugin {
+                    spec: FieldSpec {
+                        cells,
+                        width,
+                        every: ((interval / dt).round() as u64).max(1),
+                    },
+                });
+            }
         }
         if interaction_range > 0.0 {
             builder.note(format!(
@@ -1370,8 +1383,16 @@ fn check_sampling(cx: &Ctx, s: &SamplingSpec, two_d: bool) -> Result<Vec<RegionS
     {
         return Err(cx.err("sampling.interval", "a positive interval in seconds"));
     }
-    if !s.domain && s.regions.is_empty() {
-        return Err(cx.err("sampling", "at least one region, or `domain: true`"));
+    if !s.domain && s.regions.is_empty() && s.fields.is_none() {
+        return Err(cx.err(
+            "sampling",
+            "at least one region, `domain: true`, or `fields`",
+        ));
+    }
+    if let Some(interval) = s.fields.as_ref().and_then(|f| f.interval)
+        && !positive(interval)
+    {
+        return Err(cx.err("sampling.fields.interval", "a positive interval in seconds"));
     }
     let mut regions = Vec::new();
     if s.domain {
@@ -1463,6 +1484,58 @@ fn check_sampling(cx: &Ctx, s: &SamplingSpec, two_d: bool) -> Result<Vec<RegionS
         });
     }
     Ok(regions)
+}
+
+/// Largest number of grid nodes of a field (each node holds about 30 numbers).
+const MAX_FIELD_NODES: u64 = 2_000_000;
+
+/// Checks the `sampling.fields` section: the cells and the kernel width, which along a
+/// periodic axis must be cut off within half the period (so that the kernel of a grain
+/// does not reach round the box onto itself).
+fn check_fields(
+    cx: &Ctx,
+    fields: &SamplingFields,
+    two_d: bool,
+    periodic: Option<&PeriodicBox>,
+) -> Result<([usize; 3], f64), SceneError> {
+    let (nx, ny, nz) = fields.cells;
+    if nx == 0 || ny == 0 || nz == 0 {
+        return Err(cx.err("sampling.fields.cells", "at least one cell along each axis"));
+    }
+    if two_d && nz != 1 {
+        return Err(cx.err(
+            "sampling.fields.cells",
+            format!("one cell along z in a 2-D scene, (nx, ny, 1), found {nz}"),
+        ));
+    }
+    let nodes = u64::from(nx) * u64::from(ny) * u64::from(nz);
+    if nodes > MAX_FIELD_NODES {
+        return Err(cx.err(
+            "sampling.fields.cells",
+            format!("at most {MAX_FIELD_NODES} cells in all, found {nodes}"),
+        ));
+    }
+    let width = fields.width;
+    if !positive(width) {
+        return Err(cx.err("sampling.fields.width", "a positive kernel width in metres"));
+    }
+    if let Some(b) = periodic {
+        let length = b.length();
+        for a in 0..3 {
+            let cutoff = talus_stress::field::CUTOFF_WIDTHS * width;
+            if b.axes[a] && cutoff > 0.5 * length[a] {
+                return Err(cx.err(
+                    "sampling.fields.width",
+                    format!(
+                        "a kernel width whose cut-off 3 w is at most half the periodic length along {} ({:.4e} m), found 3 w = {cutoff:.4e} m",
+                        ["x", "y", "z"][a],
+                        0.5 * length[a]
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(([nx as usize, ny as usize, nz as usize], width))
 }
 
 fn region_name(r: &SamplingRegion) -> &str {

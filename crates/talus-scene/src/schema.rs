@@ -503,6 +503,22 @@ pub struct SamplingSpec {
     /// Regions sampled besides the domain.
     #[serde(default)]
     pub regions: Vec<SamplingRegion>,
+    /// Coarse-grained fields on a grid over the domain box. Default: none.
+    #[serde(default)]
+    pub fields: Option<SamplingFields>,
+}
+
+/// Coarse-grained fields: `fields: (cells: (20, 20, 20), width: 0.002)`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SamplingFields {
+    /// Grid cells along x, y, z over the domain box (z = 1 in 2-D).
+    pub cells: (u32, u32, u32),
+    /// Kernel width w (standard deviation of the Gaussian), m.
+    pub width: f64,
+    /// Simulated time between field samples, s. Default: the sampling interval.
+    #[serde(default)]
+    pub interval: Option<f64>,
 }
 
 /// A region in which stresses are sampled.

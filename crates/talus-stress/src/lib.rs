@@ -1,6 +1,7 @@
 //! Talus stress sampling: the Love–Weber contact stress, the kinetic stress, the couple
 //! stress and the inertial number, over the whole domain and over boxes and slabs a
-//! scene defines, as a plugin that is only built when a scene asks for it.
+//! scene defines, and coarse-grained fields (density, velocity, stress) on a grid, as
+//! plugins that are only built when a scene asks for them.
 //!
 //! The physics and every convention (tension positive, p = −tr σ / D, branch vectors,
 //! clipping of contacts that cross a region's boundary, volumes, the shear-rate fit) are
@@ -25,11 +26,16 @@
 //! # }
 //! ```
 
+pub mod field;
 pub mod region;
 pub mod sample;
 pub mod tensor;
 
-pub use region::{Bounds, RegionKind, RegionShape, RegionSpec};
+pub use field::{
+    CoarseGrainingPlugin, FIELD_SYSTEM_NAME, FieldRecord, FieldSample, FieldSettings, FieldSpec,
+    sample_fields,
+};
+pub use region::{Bounds, RegionKind, RegionShape, RegionSpec, Seams};
 pub use sample::{
     FlowRegime, GAS_LIKE_LIMIT, QUASI_STATIC_LIMIT, RegionStress, ShearRateSource, StressRecord,
     StressSample, StressScratch, StressSettings, sample_stress,

@@ -1,8 +1,10 @@
 //! Sampling regions: the whole domain, axis-aligned boxes and slabs; the domain box
-//! found from the walls and grains; and the clipping of branch segments to a region.
+//! found from the walls and grains; and the clipping of branch segments to a region,
+//! with its periodic images where the domain is periodic.
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
+use talus_core::periodic::PeriodicBox;
 use talus_core::snapshot::WallState;
 
 /// How far from a unit axis vector a wall normal may be and still count as facing
@@ -142,6 +144,128 @@ impl Bounds {
     }
 }
 
+/// Image shifts, in box lengths, tried along a periodic axis around the image of a region
+/// whose lower face is the last one at or below a segment's start: a segment reaching at
+/// most one box length from its start meets no other (see
+/// [`Bounds::periodic_segment_fraction`]).
+const IMAGE_SHIFTS: [f64; 3] = [-1.0, 0.0, 1.0];
+
+/// The periodic axes of a sample and their lengths: along them a region is repeated
+/// every box length, so that it holds the grains and branch parts of its images too.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Seams {
+    /// Which axes are periodic.
+    pub axes: [bool; 3],
+    /// Box length along each periodic axis, m (unused along the others).
+    pub length: DVec3,
+}
+
+impl Seams {
+    /// No periodic axis.
+    pub const NONE: Seams = Seams {
+        axes: [false; 3],
+        length: DVec3::ZERO,
+    };
+
+    /// The seams of a periodic box, if there is one.
+    pub fn of(periodic: Option<&PeriodicBox>) -> Seams {
+        periodic.map_or(Seams::NONE, |b| Seams {
+            axes: b.axes,
+            length: b.length(),
+        })
+    }
+
+    /// Whether a box bounded along `axis` from `min` to `max` is repeated along it: a
+    /// periodic axis and a finite extent.
+    fn repeats(&self, axis: usize, min: f64, max: f64) -> bool {
+        self.axes[axis] && min.is_finite() && max.is_finite()
+    }
+}
+
+impl Bounds {
+    /// Whether `p` or one of its periodic images lies inside (half-open as
+    /// [`Bounds::contains`]). Along a periodic axis the box must be narrower than the
+    /// period (see [`region_boxes`], which makes wider ones unbounded there).
+    pub fn contains_periodic(&self, p: DVec3, seams: &Seams) -> bool {
+        (0..3).all(|d| {
+            let (lo, hi) = (self.min[d], self.max[d]);
+            if seams.repeats(d, lo, hi) {
+                let l = seams.length[d];
+                // The image of p at or above lo, within one period.
+                let mut x = p[d] - l * ((p[d] - lo) / l).floor();
+                if x < lo {
+                    x += l;
+                }
+                x < hi
+            } else {
+                lo <= p[d] && p[d] < hi
+            }
+        })
+    }
+
+    /// Fraction of the segment from `a` to `b` inside the box or one of its periodic
+    /// images. Along a periodic axis the box must be narrower than the period, so that
+    /// its images are disjoint and their fractions add, and the segment must reach at
+    /// most one period from `a` along it (a branch between nearest images reaches half
+    /// a period at most). Without periodic axes this is [`Bounds::segment_fraction`].
+    pub fn periodic_segment_fraction(&self, a: DVec3, b: DVec3, seams: &Seams) -> f64 {
+        // Per axis, the parameter intervals t ∈ [0, 1] in which the segment lies inside
+        // the slab of the box (and of its images) along that axis; the fraction is the
+        // measure of the intersection over the axes of these disjoint unions.
+        let mut spans = [[(0.0f64, 0.0f64); IMAGE_SHIFTS.len()]; 3];
+        let mut counts = [0usize; 3];
+        for d in 0..3 {
+            let repeats = seams.repeats(d, self.min[d], self.max[d]);
+            let shifts: &[f64] = if repeats {
+                &IMAGE_SHIFTS
+            } else {
+                &IMAGE_SHIFTS[1..2]
+            };
+            // The image whose lower face is the last at or below a: the segment lies
+            // between the faces of the images just below and just above it.
+            let base = if repeats {
+                ((a[d] - self.min[d]) / seams.length[d]).floor()
+            } else {
+                0.0
+            };
+            let delta = b[d] - a[d];
+            for &k in shifts {
+                let shift = (base + k) * seams.length[d];
+                let (lo, hi) = (self.min[d] + shift, self.max[d] + shift);
+                let span = if delta == 0.0 {
+                    (lo <= a[d] && a[d] < hi).then_some((0.0, 1.0))
+                } else {
+                    let ta = (lo - a[d]) / delta;
+                    let tb = (hi - a[d]) / delta;
+                    let (t0, t1) = if ta <= tb { (ta, tb) } else { (tb, ta) };
+                    let (t0, t1) = (t0.max(0.0), t1.min(1.0));
+                    (t1 > t0).then_some((t0, t1))
+                };
+                if let Some(span) = span {
+                    spans[d][counts[d]] = span;
+                    counts[d] += 1;
+                }
+            }
+            if counts[d] == 0 {
+                return 0.0;
+            }
+        }
+        let mut total = 0.0;
+        for &(x0, x1) in &spans[0][..counts[0]] {
+            for &(y0, y1) in &spans[1][..counts[1]] {
+                for &(z0, z1) in &spans[2][..counts[2]] {
+                    let t0 = x0.max(y0).max(z0);
+                    let t1 = x1.min(y1).min(z1);
+                    if t1 > t0 {
+                        total += t1 - t0;
+                    }
+                }
+            }
+        }
+        total
+    }
+}
+
 /// Where the boxes of a sample come from: the walls and the grains' extent.
 pub(crate) struct DomainInputs<'a> {
     /// Walls of the snapshot.
@@ -187,11 +311,28 @@ pub(crate) fn domain_bounds(inputs: &DomainInputs) -> Bounds {
     Bounds { min, max }
 }
 
+/// The domain box of a sample: [`domain_bounds`] from the walls and the grains' extent,
+/// and along each periodic axis the periodic box itself.
+pub(crate) fn sample_domain(inputs: &DomainInputs, periodic: Option<&PeriodicBox>) -> Bounds {
+    let mut domain = domain_bounds(inputs);
+    if let Some(b) = periodic {
+        for a in 0..3 {
+            if b.axes[a] {
+                domain.min[a] = b.lo[a];
+                domain.max[a] = b.hi[a];
+            }
+        }
+    }
+    domain
+}
+
 /// The boxes of one region for one sample: `clip` decides which grain centres belong to
 /// it and how much of each branch segment counts; `volume` is the box whose volume
 /// divides the sums (and is reported): the region's part of the domain box, so that a
 /// region reaching past the walls (or past the grains, where no wall bounds the domain)
-/// is not diluted by empty space.
+/// is not diluted by empty space. Along a periodic axis the region is repeated every
+/// period (`seams`): it holds the grains and branch parts of its images, and its volume
+/// there is its own extent (at most one period), wherever it lies relative to the box.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct RegionBoxes {
     /// Membership of grain centres and clipping of branch segments.
@@ -200,16 +341,38 @@ pub(crate) struct RegionBoxes {
     pub volume: Bounds,
     /// Whether every contact counts whole (the domain: no clipping at all).
     pub whole: bool,
+    /// The periodic axes along which `clip` is repeated.
+    pub seams: Seams,
 }
 
-/// The boxes of a region given the domain box.
-pub(crate) fn region_boxes(shape: &RegionShape, domain: &Bounds, dims: usize) -> RegionBoxes {
-    match *shape {
-        RegionShape::Domain => RegionBoxes {
-            clip: Bounds::EVERYWHERE,
-            volume: *domain,
-            whole: true,
-        },
+impl RegionBoxes {
+    /// Whether a grain centre belongs to the region (or to one of its images).
+    #[inline]
+    pub fn holds(&self, p: DVec3) -> bool {
+        self.whole || self.clip.contains_periodic(p, &self.seams)
+    }
+
+    /// The fraction of the branch segment from `a` to `b` that counts in the region: 1 for
+    /// the domain, else the part inside the region and its periodic images.
+    #[inline]
+    pub fn fraction(&self, a: DVec3, b: DVec3) -> f64 {
+        if self.whole {
+            1.0
+        } else {
+            self.clip.periodic_segment_fraction(a, b, &self.seams)
+        }
+    }
+}
+
+/// The boxes of a region given the domain box and the periodic axes.
+pub(crate) fn region_boxes(
+    shape: &RegionShape,
+    domain: &Bounds,
+    dims: usize,
+    seams: &Seams,
+) -> RegionBoxes {
+    let (mut clip, mut volume, whole) = match *shape {
+        RegionShape::Domain => (Bounds::EVERYWHERE, *domain, true),
         RegionShape::Box { min, max } => {
             let mut clip = Bounds { min, max };
             let mut volume = clip.intersection(domain);
@@ -220,11 +383,7 @@ pub(crate) fn region_boxes(shape: &RegionShape, domain: &Bounds, dims: usize) ->
                 volume.min.z = -0.5;
                 volume.max.z = 0.5;
             }
-            RegionBoxes {
-                clip,
-                volume,
-                whole: false,
-            }
+            (clip, volume, false)
         }
         RegionShape::Slab { axis, min, max } => {
             let mut clip = Bounds::EVERYWHERE;
@@ -235,12 +394,32 @@ pub(crate) fn region_boxes(shape: &RegionShape, domain: &Bounds, dims: usize) ->
                 volume.min[axis] = volume.min[axis].max(min);
                 volume.max[axis] = volume.max[axis].min(max);
             }
-            RegionBoxes {
-                clip,
-                volume,
-                whole: false,
+            (clip, volume, false)
+        }
+    };
+    if !whole {
+        for d in 0..3 {
+            if !seams.repeats(d, clip.min[d], clip.max[d]) {
+                continue;
+            }
+            if clip.max[d] - clip.min[d] >= seams.length[d] {
+                // At least a whole period: every image of every point is inside.
+                clip.min[d] = f64::NEG_INFINITY;
+                clip.max[d] = f64::INFINITY;
+                volume.min[d] = domain.min[d];
+                volume.max[d] = domain.max[d];
+            } else {
+                // Its own extent, wherever it lies: its images fill the rest.
+                volume.min[d] = clip.min[d];
+                volume.max[d] = clip.max[d];
             }
         }
+    }
+    RegionBoxes {
+        clip,
+        volume,
+        whole,
+        seams: *seams,
     }
 }
 
@@ -290,6 +469,77 @@ mod tests {
             })
             .sum();
         assert!((total - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn periodic_images_of_a_region_hold_the_branch_across_the_seam() {
+        let seams = Seams {
+            axes: [true, false, false],
+            length: DVec3::new(1.0, 0.0, 0.0),
+        };
+        let slab = |lo: f64, hi: f64| {
+            let mut s = Bounds::EVERYWHERE;
+            s.min.x = lo;
+            s.max.x = hi;
+            s
+        };
+        // A branch from 0.9 to 1.1 (its far end is the image of a grain at 0.1).
+        let (a, b) = (DVec3::new(0.9, 0.3, 0.0), DVec3::new(1.1, 0.2, 0.0));
+        let first = slab(0.0, 0.25).periodic_segment_fraction(a, b, &seams);
+        assert!((first - 0.5).abs() < 1e-15, "{first}");
+        // Without the images the part past the seam is lost.
+        assert_eq!(slab(0.0, 0.25).segment_fraction(a, b), 0.0);
+        // Slabs tiling the box share the branch exactly.
+        let cuts = [0.0, 0.25, 0.5, 0.95, 1.0];
+        let total: f64 = cuts
+            .windows(2)
+            .map(|w| slab(w[0], w[1]).periodic_segment_fraction(a, b, &seams))
+            .sum();
+        assert!((total - 1.0).abs() < 1e-15, "{total}");
+        // A region across the seam, given on either side of it, holds the whole branch.
+        for (lo, hi) in [(-0.2, 0.2), (0.8, 1.2), (1.8, 2.2), (-2.2, -1.8)] {
+            let f = slab(lo, hi).periodic_segment_fraction(a, b, &seams);
+            assert!((f - 1.0).abs() < 1e-15, "({lo}, {hi}): {f}");
+            assert!(slab(lo, hi).contains_periodic(DVec3::new(0.05, 0.0, 0.0), &seams));
+            assert!(slab(lo, hi).contains_periodic(DVec3::new(0.85, 0.0, 0.0), &seams));
+            assert!(!slab(lo, hi).contains_periodic(DVec3::new(0.5, 0.0, 0.0), &seams));
+        }
+        // Along a non-periodic axis nothing is repeated.
+        let mut lower = Bounds::EVERYWHERE;
+        lower.max.y = 0.25;
+        let f = lower.periodic_segment_fraction(a, b, &seams);
+        assert!((f - 0.5).abs() < 1e-15, "{f}");
+    }
+
+    #[test]
+    fn a_region_of_a_whole_period_is_unbounded_along_it() {
+        let seams = Seams {
+            axes: [false, false, true],
+            length: DVec3::new(0.0, 0.0, 2.0),
+        };
+        let domain = Bounds {
+            min: DVec3::ZERO,
+            max: DVec3::new(1.0, 1.0, 2.0),
+        };
+        let wide = RegionShape::Slab {
+            axis: 2,
+            min: -1.0,
+            max: 3.0,
+        };
+        let boxes = region_boxes(&wide, &domain, 3, &seams);
+        assert_eq!(boxes.volume, domain);
+        assert!(boxes.holds(DVec3::new(0.5, 0.5, 1.9)));
+        let a = DVec3::new(0.5, 0.5, 1.9);
+        assert_eq!(boxes.fraction(a, a + DVec3::new(0.0, 0.0, 0.3)), 1.0);
+        let seam = RegionShape::Slab {
+            axis: 2,
+            min: -0.5,
+            max: 0.5,
+        };
+        let boxes = region_boxes(&seam, &domain, 3, &seams);
+        assert_eq!(boxes.volume.volume(3), 1.0);
+        assert!(boxes.holds(DVec3::new(0.5, 0.5, 1.9)));
+        assert!(!boxes.holds(DVec3::new(0.5, 0.5, 1.0)));
     }
 
     #[test]

@@ -9,7 +9,7 @@ use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind};
 use talus_core::prelude::*;
 
 use crate::region::{
-    Bounds, DomainInputs, RegionBoxes, RegionKind, RegionSpec, domain_bounds, region_boxes,
+    Bounds, DomainInputs, RegionBoxes, RegionKind, RegionSpec, Seams, region_boxes, sample_domain,
 };
 use crate::tensor::Tensor;
 
@@ -254,26 +254,22 @@ pub fn sample_stress(
         grain_min = DVec3::ZERO;
         grain_max = DVec3::ZERO;
     }
-    let mut domain = domain_bounds(&DomainInputs {
-        walls: &snapshot.walls,
-        grain_min,
-        grain_max,
-        dims,
-    });
-    // Along a periodic axis the domain is the periodic box itself.
-    if let Some(b) = &snapshot.periodic {
-        for a in 0..3 {
-            if b.axes[a] {
-                domain.min[a] = b.lo[a];
-                domain.max[a] = b.hi[a];
-            }
-        }
-    }
+    // The domain box; along a periodic axis, the periodic box itself.
+    let domain = sample_domain(
+        &DomainInputs {
+            walls: &snapshot.walls,
+            grain_min,
+            grain_max,
+            dims,
+        },
+        snapshot.periodic.as_ref(),
+    );
+    let seams = Seams::of(snapshot.periodic.as_ref());
 
     let sums = &mut scratch.sums;
     sums.clear();
     sums.extend(settings.regions.iter().map(|r| Sums {
-        boxes: Some(region_boxes(&r.shape, &domain, dims)),
+        boxes: Some(region_boxes(&r.shape, &domain, dims, &seams)),
         ..Sums::default()
     }));
 
@@ -282,7 +278,7 @@ pub fn sample_stress(
         let rho = density_of(mat);
         for s in sums.iter_mut() {
             let b = s.boxes.expect("set above");
-            if !(b.whole || b.clip.contains(p.0)) {
+            if !b.holds(p.0) {
                 continue;
             }
             s.grains += 1;
@@ -307,7 +303,7 @@ pub fn sample_stress(
     for (p, v, _, m, _) in &grains {
         for s in sums.iter_mut() {
             let b = s.boxes.expect("set above");
-            if !(b.whole || b.clip.contains(p.0)) {
+            if !b.holds(p.0) {
                 continue;
             }
             let dv = v.0 - s.mean_velocity;
@@ -353,24 +349,13 @@ pub fn sample_stress(
         let branch = far - xa;
         for s in sums.iter_mut() {
             let b = s.boxes.expect("set above");
-            let weight = if b.whole {
-                1.0
-            } else {
-                b.clip.segment_fraction(xa, far)
-            };
+            let weight = b.fraction(xa, far);
             if weight > 0.0 {
                 s.contact.add_outer(f.force, branch, weight);
                 s.contacts += usize::from(active);
             }
             if torque {
-                let (wa, wb) = if b.whole {
-                    (1.0, 1.0)
-                } else {
-                    (
-                        b.clip.segment_fraction(xa, point),
-                        b.clip.segment_fraction(far, point),
-                    )
-                };
+                let (wa, wb) = (b.fraction(xa, point), b.fraction(far, point));
                 s.couple.add_outer(moment_a, point - xa, wa);
                 if c.kind == ContactKind::GrainGrain {
                     s.couple.add_outer(moment_b, point - far, wb);
