@@ -588,6 +588,7 @@ fn report_and_recording_carry_the_fields() {
         out: Some(dir.join("out")),
         quiet: true,
         progress: false,
+        ..Default::default()
     };
     let summary = talus::cli::run_scene(&path, &talus::registry(), &options).unwrap();
     let written: FieldSample =
@@ -625,6 +626,7 @@ fn report_and_recording_carry_the_fields() {
         out: Some(dir.join("plain")),
         quiet: true,
         progress: false,
+        ..Default::default()
     };
     talus::cli::run_scene(&path, &talus::registry(), &options).unwrap();
     assert!(!dir.join("plain/fields.json").exists());

@@ -29,7 +29,8 @@ fn build(text: &str, resume: Option<&SavedState>) -> Simulation {
 /// Steps until the protocol asks to stop (or `limit` steps); returns the reason.
 fn run_until_stop(sim: &mut Simulation, limit: u64) -> Option<String> {
     for _ in 0..limit {
-        sim.step().unwrap_or_else(|b| panic!("blow-up: {}", b.reason));
+        sim.step()
+            .unwrap_or_else(|b| panic!("blow-up: {}", b.reason));
         if let Some(r) = sim.world.resource::<StopRequest>().0.clone() {
             return Some(r);
         }
@@ -59,7 +60,8 @@ fn isotropic_compression_reaches_the_target_solid_fraction_in_equilibrium() {
     let mut reason = None;
     let mut steps = 0u64;
     while steps < 2_000_000 {
-        sim.step().unwrap_or_else(|b| panic!("blow-up: {}", b.reason));
+        sim.step()
+            .unwrap_or_else(|b| panic!("blow-up: {}", b.reason));
         steps += 1;
         // The inertial number the compression ran at, from its own strain rate and the
         // pressure it measured (while it compresses under a real pressure).
@@ -125,11 +127,19 @@ fn sequential_deposition_settles_every_batch_and_the_floor_carries_the_weight() 
     let reason = run_until_stop(&mut sim, 3_000_000).expect("the deposition ends");
     eprintln!("{reason} at step {}", sim.step_count());
     assert!(reason.starts_with("deposited"), "{reason}");
-    let mut q = sim.world.query_filtered::<(&Position, &Mass), With<Grain>>();
+    let mut q = sim
+        .world
+        .query_filtered::<(&Position, &Mass), With<Grain>>();
     let grains: Vec<(DVec3, f64)> = q.iter(&sim.world).map(|(p, m)| (p.0, m.0)).collect();
     assert_eq!(grains.len(), 120, "three batches of 40");
-    assert_eq!(sim.world.resource::<Deposition>().progress.batches_inserted, 3);
-    assert!(grains.iter().all(|(p, _)| p.z < 0.02), "all grains fell into the box");
+    assert_eq!(
+        sim.world.resource::<Deposition>().progress.batches_inserted,
+        3
+    );
+    assert!(
+        grains.iter().all(|(p, _)| p.z < 0.02),
+        "all grains fell into the box"
+    );
     // Static equilibrium: the floor carries the whole weight (friction on the side walls
     // can carry a share, so the floor takes at most the weight and most of it).
     let weight: f64 = grains.iter().map(|(_, m)| m * 9.81).sum();
@@ -161,9 +171,18 @@ fn a_deposition_resumed_between_batches_is_bit_identical() {
     let mut first = build(&deposition(total), None);
     first.prime().unwrap();
     // Run until the second batch is in, then a little more.
-    while first.world.resource::<Deposition>().progress.batches_inserted < 2 {
+    while first
+        .world
+        .resource::<Deposition>()
+        .progress
+        .batches_inserted
+        < 2
+    {
         first.step().unwrap();
-        assert!(first.step_count() < total / 2, "second batch too late for this test");
+        assert!(
+            first.step_count() < total / 2,
+            "second batch too late for this test"
+        );
     }
     first.run_steps(777).unwrap();
     let split = first.step_count();
@@ -171,6 +190,7 @@ fn a_deposition_resumed_between_batches_is_bit_identical() {
     assert_eq!(saved.deposition.unwrap().batches_inserted, 2);
     let mut second = build(&deposition(total), Some(&saved));
     second.run_steps(total - split).unwrap();
-    let text = |sim: &mut Simulation| ron::to_string(&SavedState::capture(&mut sim.world, "d")).unwrap();
+    let text =
+        |sim: &mut Simulation| ron::to_string(&SavedState::capture(&mut sim.world, "d")).unwrap();
     assert!(text(&mut whole) == text(&mut second));
 }

@@ -208,7 +208,11 @@ fn talus_run_resume_continues_a_saved_run_exactly() {
     let bits = |s: &talus::cli::report::ReportSample| serde_json::to_string(s).unwrap();
     assert_eq!(second.report.samples[0].step, 1500);
     let after = |r: &talus::cli::Report| -> Vec<String> {
-        r.samples.iter().filter(|s| s.step > 1500).map(bits).collect()
+        r.samples
+            .iter()
+            .filter(|s| s.step > 1500)
+            .map(bits)
+            .collect()
     };
     assert!(after(&second.report).len() > 5);
     assert_eq!(after(&second.report), after(&whole.report));
@@ -263,12 +267,29 @@ fn a_scene_can_start_from_a_saved_packing_with_its_contacts() {
     }
     for (a, b) in saved.grains.iter().zip(&restored.grains) {
         assert_eq!(
-            (a.position, a.velocity, a.angular_velocity, a.radius, a.mass, a.inertia),
-            (b.position, b.velocity, b.angular_velocity, b.radius, b.mass, b.inertia),
+            (
+                a.position,
+                a.velocity,
+                a.angular_velocity,
+                a.radius,
+                a.mass,
+                a.inertia
+            ),
+            (
+                b.position,
+                b.velocity,
+                b.angular_velocity,
+                b.radius,
+                b.mass,
+                b.inertia
+            ),
             "grains come back exactly"
         );
     }
-    assert_eq!(restored.ledger.gravity_work, 0.0, "a new run books from zero");
+    assert_eq!(
+        restored.ledger.gravity_work, 0.0,
+        "a new run books from zero"
+    );
 }
 
 /// A state file that is not one, or of another scene, is a clear error.

@@ -684,19 +684,28 @@ impl Scene {
                 RadiusSpec::Fixed(r) if !positive(r) => {
                     return Err(cx.err(&field("radius"), "a positive radius in metres"));
                 }
-                RadiusSpec::Uniform { min, max } if !(positive(min) && positive(max) && min <= max) => {
+                RadiusSpec::Uniform { min, max }
+                    if !(positive(min) && positive(max) && min <= max) =>
+                {
                     return Err(cx.err(&field("radius"), "radii with 0 < min ≤ max"));
                 }
                 _ => {}
             }
             if d.batch_size == 0 || d.batches == 0 {
                 return Err(cx.err(
-                    &field(if d.batch_size == 0 { "batch_size" } else { "batches" }),
+                    &field(if d.batch_size == 0 {
+                        "batch_size"
+                    } else {
+                        "batches"
+                    }),
                     "at least one",
                 ));
             }
             if !positive(d.settle_kinetic_energy) {
-                return Err(cx.err(&field("settle_kinetic_energy"), "a positive energy in joules"));
+                return Err(cx.err(
+                    &field("settle_kinetic_energy"),
+                    "a positive energy in joules",
+                ));
             }
             if !positive(d.unbalanced_force) {
                 return Err(cx.err(&field("unbalanced_force"), "a positive ratio"));
@@ -724,7 +733,12 @@ impl Scene {
                         two_d,
                         &existing,
                     )
-                    .map_err(|(sub, expected)| cx.err(&field(if sub == "count" { "batch_size" } else { &sub }), expected))?;
+                    .map_err(|(sub, expected)| {
+                        cx.err(
+                            &field(if sub == "count" { "batch_size" } else { &sub }),
+                            expected,
+                        )
+                    })?;
                     grains.extend(batch.into_iter().map(|(p, r, _)| GrainInit {
                         position: p,
                         radius: r,
@@ -736,7 +750,9 @@ impl Scene {
                         frozen: false,
                         saved: None,
                     }));
-                    crate::packing::DepositionProgress { batches_inserted: 1 }
+                    crate::packing::DepositionProgress {
+                        batches_inserted: 1,
+                    }
                 }
             };
             deposition = Some((mat, progress));
@@ -1133,26 +1149,49 @@ impl Scene {
         if let Some(c) = &f.compression {
             let axes = if two_d { 2 } else { 3 };
             let Some(cell) = &periodic else {
-                return Err(cx.err("compression", "a scene periodic along every axis (`periodic`)"));
+                return Err(cx.err(
+                    "compression",
+                    "a scene periodic along every axis (`periodic`)",
+                ));
             };
             if (0..axes).any(|a| !cell.axes[a]) {
                 return Err(cx.err(
                     "periodic",
-                    format!("periodic boundaries along every axis ({}) for `compression`", if two_d { "x and y" } else { "x, y and z" }),
+                    format!(
+                        "periodic boundaries along every axis ({}) for `compression`",
+                        if two_d { "x and y" } else { "x, y and z" }
+                    ),
                 ));
             }
             if gravity != DVec3::ZERO {
                 return Err(cx.err("gravity", "no gravity with an isotropic `compression`"));
             }
             if f.integrator == IntegratorName::Gear {
-                return Err(cx.err("integrator", "VelocityVerlet or SymplecticEuler with `compression`"));
+                return Err(cx.err(
+                    "integrator",
+                    "VelocityVerlet or SymplecticEuler with `compression`",
+                ));
             }
             let target = match (c.target_solid_fraction, c.target_pressure) {
-                (Some(phi), None) if phi > 0.0 && phi < 1.0 => crate::packing::CompressionTarget::SolidFraction(phi),
+                (Some(phi), None) if phi > 0.0 && phi < 1.0 => {
+                    crate::packing::CompressionTarget::SolidFraction(phi)
+                }
                 (None, Some(p)) if positive(p) => crate::packing::CompressionTarget::Pressure(p),
-                (Some(_), None) => return Err(cx.err("compression.target_solid_fraction", "a solid fraction in (0, 1)")),
-                (None, Some(_)) => return Err(cx.err("compression.target_pressure", "a positive pressure in Pa")),
-                _ => return Err(cx.err("compression", "exactly one of `target_solid_fraction` and `target_pressure`")),
+                (Some(_), None) => {
+                    return Err(cx.err(
+                        "compression.target_solid_fraction",
+                        "a solid fraction in (0, 1)",
+                    ));
+                }
+                (None, Some(_)) => {
+                    return Err(cx.err("compression.target_pressure", "a positive pressure in Pa"));
+                }
+                _ => {
+                    return Err(cx.err(
+                        "compression",
+                        "exactly one of `target_solid_fraction` and `target_pressure`",
+                    ));
+                }
             };
             for (name, v) in [
                 ("max_strain_rate", c.max_strain_rate),
@@ -1190,7 +1229,11 @@ impl Scene {
                 strain_rate: 0.0,
                 pressure: 0.0,
             });
-            builder.add_system(Stage::Prepare, "isotropic_compression", crate::packing::compression);
+            builder.add_system(
+                Stage::Prepare,
+                "isotropic_compression",
+                crate::packing::compression,
+            );
             builder.note(format!(
                 "isotropic compression of the periodic cell to {target:?}, inertial number ≤ {:.1e}, strain rate ≤ {:.3e} 1/s; stops at unbalanced-force ratio < {:.1e}",
                 c.max_inertial_number, c.max_strain_rate, c.unbalanced_force

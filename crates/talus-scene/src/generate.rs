@@ -124,8 +124,8 @@ pub fn generate(
             seed,
             velocity_spread,
             ..
-        } => {
-            random_insertion(region, *count, radius, *seed, *velocity_spread, two_d, &[]).map(|grains| {
+        } => random_insertion(region, *count, radius, *seed, *velocity_spread, two_d, &[]).map(
+            |grains| {
                 grains
                     .into_iter()
                     .map(|(p, r, vel)| GrainInit {
@@ -140,8 +140,8 @@ pub fn generate(
                         saved: None,
                     })
                     .collect()
-            })
-        }
+            },
+        ),
     }
 }
 
