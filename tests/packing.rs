@@ -110,11 +110,11 @@ fn deposition(steps: u64) -> String {
     plugins: ["linear_spring"],
     materials: [(name: "glass", density: 2500.0,
         contact: (law: "linear_spring", stiffness: 2000.0, restitution: 0.3, friction: 0.4))],
-    walls: [Box(min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.05), material: "glass", omit: ["z_max"])],
+    walls: [Box(min: (0.0, 0.0, 0.0), max: (0.012, 0.012, 0.07), material: "glass", omit: ["z_max"])],
     grains: [],
-    deposition: (material: "glass", region: (min: (0.0, 0.0, 0.02), max: (0.02, 0.02, 0.035)),
-        radius: Uniform(min: 0.0012, max: 0.0016), batch_size: 40, batches: 3, seed: 9,
-        settle_kinetic_energy: 1e-10, unbalanced_force: 1e-2, check_interval: 0.002),
+    deposition: (material: "glass", region: (min: (0.0, 0.0, 0.035), max: (0.012, 0.012, 0.065)),
+        radius: Uniform(min: 0.0012, max: 0.0016), batch_size: 60, batches: 3, seed: 9,
+        settle_kinetic_energy: 1e-9, unbalanced_force: 1e-2, check_interval: 0.002),
     output: (recording: false, report_interval: 0.002),
 )"#
     )
@@ -131,14 +131,14 @@ fn sequential_deposition_settles_every_batch_and_the_floor_carries_the_weight() 
         .world
         .query_filtered::<(&Position, &Mass), With<Grain>>();
     let grains: Vec<(DVec3, f64)> = q.iter(&sim.world).map(|(p, m)| (p.0, m.0)).collect();
-    assert_eq!(grains.len(), 120, "three batches of 40");
+    assert_eq!(grains.len(), 180, "three batches of 60");
     assert_eq!(
         sim.world.resource::<Deposition>().progress.batches_inserted,
         3
     );
     assert!(
-        grains.iter().all(|(p, _)| p.z < 0.02),
-        "all grains fell into the box"
+        grains.iter().all(|(p, _)| p.z < 0.035),
+        "all grains fell below the insertion region"
     );
     // Static equilibrium: the floor carries the whole weight (friction on the side walls
     // can carry a share, so the floor takes at most the weight and most of it).
@@ -164,7 +164,7 @@ fn sequential_deposition_settles_every_batch_and_the_floor_carries_the_weight() 
 /// ends in the same packing, bit for bit.
 #[test]
 fn a_deposition_resumed_between_batches_is_bit_identical() {
-    let total = 60_000;
+    let total = 120_000;
     let mut whole = build(&deposition(total), None);
     whole.prime().unwrap();
     whole.run_steps(total).unwrap();
