@@ -2,6 +2,7 @@
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
+use talus_core::periodic::{LeesEdwards, PeriodicBox};
 use talus_core::snapshot::GrainSnapshot;
 
 /// Grains binned into cubic cells, rebuilt every step. Cells are stored densely
@@ -188,5 +189,85 @@ impl CellGrid {
                 len: hi - lo + 1,
             }
         }
+    }
+}
+
+/// Up to nine distinct cells along the flow axis of a Lees–Edwards box (see
+/// [`CellGrid::sheared_flow_cells`]).
+pub struct FlowCells {
+    cells: [usize; 9],
+    len: usize,
+}
+
+impl FlowCells {
+    /// The cells, sorted, each once.
+    #[inline]
+    pub fn cells(&self) -> &[usize] {
+        &self.cells[..self.len]
+    }
+
+    fn push_around(&mut self, grid: &CellGrid, flow: usize, k: usize) {
+        let around = grid.neighbour_cells(
+            {
+                let mut c = [0; 3];
+                c[flow] = k;
+                c
+            },
+            flow,
+        );
+        for &cell in around.cells() {
+            self.cells[self.len] = cell;
+            self.len += 1;
+        }
+    }
+}
+
+impl CellGrid {
+    /// The flow-axis cells to search, in a Lees–Edwards box, for partners of a grain at
+    /// `p` (cell `c`) among the grains of gradient-axis cell `cg` (one of the gradient
+    /// neighbours of `c`). A partner reached without crossing the gradient seam lies
+    /// within one flow cell of the grain; one reached through the top seam (grain in the
+    /// top gradient cell, partner in the bottom one) lies within one cell of x_f − Δ, and
+    /// through the bottom seam of x_f + Δ, since its nearest image is shifted by ±Δ. With
+    /// one or two gradient cells several of these hold at once; each cell is listed once.
+    pub fn sheared_flow_cells(
+        &self,
+        b: &PeriodicBox,
+        shear: &LeesEdwards,
+        p: DVec3,
+        c: [usize; 3],
+        cg: usize,
+    ) -> FlowCells {
+        let (g, f) = (shear.gradient, shear.flow);
+        let (k, n) = (c[g], self.dims[g]);
+        let mut out = FlowCells {
+            cells: [0; 9],
+            len: 0,
+        };
+        let flow_cell = |x: f64| {
+            let mut q = p;
+            q[f] = x;
+            self.coords(b.wrap(q))[f]
+        };
+        if cg + 1 >= k && cg <= k + 1 {
+            out.push_around(self, f, c[f]);
+        }
+        if k == n - 1 && cg == 0 {
+            out.push_around(self, f, flow_cell(p[f] - shear.offset));
+        }
+        if k == 0 && cg == n - 1 {
+            out.push_around(self, f, flow_cell(p[f] + shear.offset));
+        }
+        let cells = &mut out.cells[..out.len];
+        cells.sort_unstable();
+        let mut len = 0;
+        for i in 0..cells.len() {
+            if i == 0 || cells[i] != cells[len - 1] {
+                cells[len] = cells[i];
+                len += 1;
+            }
+        }
+        out.len = len;
+        out
     }
 }

@@ -7,6 +7,7 @@
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rayon::prelude::*;
+use talus_core::periodic::{LeesEdwards, PeriodicBox};
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
@@ -31,6 +32,8 @@ pub struct NeighbourList {
     entities: Vec<Entity>,
     /// Number of builds so far.
     pub builds: u64,
+    /// Lees–Edwards image offset at the last build, m (0 without shear).
+    offset: f64,
 }
 
 impl NeighbourList {
@@ -46,7 +49,22 @@ impl NeighbourList {
         if self.entities.len() != s.len() || self.entities != s.entity {
             return true;
         }
-        let half = 0.5 * self.skin;
+        // Across a Lees–Edwards seam a pair's separation also changes with the image
+        // offset: exact as long as 2 × (largest move) + |change of Δ| stays within the skin.
+        let mut half = 0.5 * self.skin;
+        if let Some(b) = &s.periodic
+            && let Some(shear) = &b.shear
+        {
+            let lf = b.length()[shear.flow];
+            let mut shift = (shear.offset - self.offset).abs();
+            if shift > 0.5 * lf {
+                shift = lf - shift;
+            }
+            half = 0.5 * (self.skin - shift);
+            if half <= 0.0 {
+                return true;
+            }
+        }
         let limit = half * half;
         s.position
             .iter()
@@ -86,6 +104,12 @@ pub fn update_neighbour_list(
                 let p = s.position[i];
                 let r = s.radius[i];
                 let c = grid.coords(p);
+                if let Some(b) = &s.periodic
+                    && let Some(shear) = &b.shear
+                {
+                    sheared_candidates(s, grid, b, shear, i, c, range + skin, out);
+                    continue;
+                }
                 let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
                 for &cz in zs.cells() {
                     for &cy in ys.cells() {
@@ -112,5 +136,52 @@ pub fn update_neighbour_list(
     list.reference.extend_from_slice(&s.position);
     list.entities.clear();
     list.entities.extend_from_slice(&s.entity);
+    list.offset = s
+        .periodic
+        .and_then(|b| b.shear)
+        .map_or(0.0, |shear| shear.offset);
     list.builds += 1;
+}
+
+/// Candidate partners j > i of grain `i` (in cell `c`) in a Lees–Edwards box: the plain
+/// stencil along the third axis and the gradient axis, and along the flow axis the cells
+/// of [`CellGrid::sheared_flow_cells`], which follow the shifted seam.
+#[allow(clippy::too_many_arguments)]
+fn sheared_candidates(
+    s: &GrainSnapshot,
+    grid: &CellGrid,
+    b: &PeriodicBox,
+    shear: &LeesEdwards,
+    i: usize,
+    c: [usize; 3],
+    extra: f64,
+    out: &mut Vec<(u32, u32)>,
+) {
+    let (g, f) = (shear.gradient, shear.flow);
+    let third = 3 - g - f;
+    let p = s.position[i];
+    let r = s.radius[i];
+    let gs = grid.neighbour_cells(c, g);
+    let ts = grid.neighbour_cells(c, third);
+    for &cg in gs.cells() {
+        let fs = grid.sheared_flow_cells(b, shear, p, c, cg);
+        for &ct in ts.cells() {
+            for &cf in fs.cells() {
+                let mut cell = [0; 3];
+                cell[g] = cg;
+                cell[f] = cf;
+                cell[third] = ct;
+                for &j in grid.cell_grains(grid.index(cell)) {
+                    if (j as usize) <= i {
+                        continue;
+                    }
+                    let reach = r + s.radius[j as usize] + extra;
+                    let d = s.separation(p, s.position[j as usize]);
+                    if d.length_squared() < reach * reach {
+                        out.push((i as u32, j));
+                    }
+                }
+            }
+        }
+    }
 }

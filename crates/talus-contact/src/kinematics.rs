@@ -74,7 +74,8 @@ impl ContactKinematics {
     #[inline]
     pub fn grain_grain(s: &GrainSnapshot, i: usize, j: usize) -> Self {
         let (ra, rb) = (s.radius[i], s.radius[j]);
-        let d = s.separation(s.position[i], s.position[j]);
+        // Across a Lees–Edwards seam b's nearest image moves faster than b itself.
+        let (d, image_velocity) = s.separation_and_image_velocity(s.position[i], s.position[j]);
         let dist = d.length();
         let normal = if dist > 0.0 { d / dist } else { DVec3::Z };
         let overlap = ra + rb - dist;
@@ -82,8 +83,8 @@ impl ContactKinematics {
         let branch_b = normal * (rb - 0.5 * overlap);
         let point = s.position[j] + branch_b;
         let (wa, wb) = (s.omega[i], s.omega[j]);
-        let relative_velocity =
-            (s.velocity[i] + wa.cross(branch_a)) - (s.velocity[j] + wb.cross(branch_b));
+        let relative_velocity = (s.velocity[i] + wa.cross(branch_a))
+            - (s.velocity[j] + image_velocity + wb.cross(branch_b));
         let normal_velocity = relative_velocity.dot(normal);
         let (ma, mb) = (s.mass[i], s.mass[j]);
         Self {

@@ -19,7 +19,7 @@ pub use glam::DVec3;
 pub mod prelude {
     pub use crate::components::*;
     pub use crate::energy::*;
-    pub use crate::periodic::PeriodicBox;
+    pub use crate::periodic::{LeesEdwards, PeriodicBox};
     pub use crate::resources::*;
     pub use crate::schedule::*;
     pub use crate::snapshot::*;

@@ -1,11 +1,30 @@
 //! Periodic boundaries: a box whose opposite faces are identified along chosen axes.
 //! Positions are wrapped into the box after each drift; pair separations take the
-//! nearest image. (Lees–Edwards shear would add an image velocity and offset here.)
+//! nearest image. With Lees–Edwards shear ([`LeesEdwards`]) the images across the
+//! gradient seam are offset along the flow axis by Δ(t) = γ̇ L_g t and move at ±γ̇ L_g
+//! (`docs/physics/lees-edwards.md`).
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 
-use crate::components::{Grain, Position};
+use crate::components::{Frozen, Grain, Position, Velocity};
+use crate::resources::Clock;
+
+/// Lees–Edwards (sliding-brick) shear of a periodic box: the periodic images one box
+/// length up the gradient axis are displaced by `offset` along the flow axis and move at
+/// `rate · L_g` along it, so that the mean flow is simple shear v_f = γ̇ (x_g − c_g) with
+/// c_g the middle of the box along the gradient axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LeesEdwards {
+    /// Shear rate γ̇ = ∂v_f/∂x_g, 1/s.
+    pub rate: f64,
+    /// Flow axis f (0, 1, 2 for x, y, z).
+    pub flow: usize,
+    /// Gradient axis g (≠ f).
+    pub gradient: usize,
+    /// Current image offset Δ along the flow axis, reduced to [−L_f/2, L_f/2), m.
+    pub offset: f64,
+}
 
 /// The periodic box: `[lo, hi)` along each axis flagged in `axes`.
 #[derive(Resource, Clone, Copy, Debug, PartialEq)]
@@ -16,6 +35,8 @@ pub struct PeriodicBox {
     pub hi: DVec3,
     /// Which axes are periodic.
     pub axes: [bool; 3],
+    /// Lees–Edwards shear, when the scene imposes one (both its axes periodic).
+    pub shear: Option<LeesEdwards>,
 }
 
 impl PeriodicBox {
@@ -28,8 +49,33 @@ impl PeriodicBox {
     /// The nearest image of a separation vector between two wrapped positions (each
     /// component within one box length, as between any two grains of the box).
     #[inline]
-    pub fn min_image(&self, mut d: DVec3) -> DVec3 {
+    pub fn min_image(&self, d: DVec3) -> DVec3 {
+        self.min_image_with_velocity(d).0
+    }
+
+    /// The nearest image of a separation d = a − b between two wrapped positions, and
+    /// the velocity that image of b has beyond b's own: zero except across a
+    /// Lees–Edwards gradient seam, where it is ±γ̇ L_g along the flow axis. The relative
+    /// velocity of the pair is v_a − v_b − (that velocity).
+    #[inline]
+    pub fn min_image_with_velocity(&self, mut d: DVec3) -> (DVec3, DVec3) {
         let l = self.length();
+        let mut image_velocity = DVec3::ZERO;
+        if let Some(shear) = &self.shear {
+            // The gradient axis first: crossing its seam shifts the flow component, which
+            // the flow axis's own nearest-image step below then brings back into range.
+            let (g, f) = (shear.gradient, shear.flow);
+            if d[g] > 0.5 * l[g] {
+                // b's nearest image is one box up: at b + L_g e_g + Δ e_f.
+                d[g] -= l[g];
+                d[f] -= shear.offset;
+                image_velocity[f] = shear.rate * l[g];
+            } else if d[g] < -0.5 * l[g] {
+                d[g] += l[g];
+                d[f] += shear.offset;
+                image_velocity[f] = -shear.rate * l[g];
+            }
+        }
         for a in 0..3 {
             // Compare and shift instead of d − L·round(d/L): `round` is a libm call on
             // baseline x86-64 and this runs for every candidate pair.
@@ -41,7 +87,7 @@ impl PeriodicBox {
                 }
             }
         }
-        d
+        (d, image_velocity)
     }
 
     /// The image of a position inside the box along the periodic axes.
@@ -61,6 +107,59 @@ impl PeriodicBox {
         }
         p
     }
+
+    /// Brings a grain back into a sheared box: through the gradient seam the position is
+    /// shifted by ∓Δ along the flow axis and the velocity by ∓γ̇ L_g (the grain becomes
+    /// its own image), then every periodic axis is wrapped. The peculiar velocity
+    /// v − γ̇ (x_g − c_g) e_f is unchanged.
+    #[inline]
+    pub fn wrap_sheared(&self, shear: &LeesEdwards, p: &mut DVec3, v: &mut DVec3) {
+        let (g, f) = (shear.gradient, shear.flow);
+        let lg = self.hi[g] - self.lo[g];
+        // A grain moves far less than a box length per step: one crossing at most, but
+        // loop so that a wild state is still wrapped consistently.
+        while p[g] >= self.hi[g] {
+            p[g] -= lg;
+            p[f] -= shear.offset;
+            v[f] -= shear.rate * lg;
+        }
+        while p[g] < self.lo[g] {
+            p[g] += lg;
+            p[f] += shear.offset;
+            v[f] += shear.rate * lg;
+        }
+        *p = self.wrap(*p);
+    }
+
+    /// The streaming (mean shear) velocity at a position: γ̇ (x_g − c_g) along the flow
+    /// axis, with c_g the middle of the box; zero without shear.
+    #[inline]
+    pub fn streaming_velocity(&self, p: DVec3) -> DVec3 {
+        let mut u = DVec3::ZERO;
+        if let Some(shear) = &self.shear {
+            let g = shear.gradient;
+            u[shear.flow] = shear.rate * (p[g] - 0.5 * (self.lo[g] + self.hi[g]));
+        }
+        u
+    }
+
+    /// Sets the Lees–Edwards offset for simulated time `t`: Δ = γ̇ L_g t reduced to
+    /// [−L_f/2, L_f/2). Computed from t rather than accumulated, so it carries no drift.
+    pub fn set_shear_time(&mut self, t: f64) {
+        let l = self.length();
+        if let Some(shear) = &mut self.shear {
+            let lf = l[shear.flow];
+            let raw = shear.rate * l[shear.gradient] * t;
+            let mut offset = raw - lf * (raw / lf).round();
+            if offset >= 0.5 * lf {
+                offset -= lf;
+            }
+            if offset < -0.5 * lf {
+                offset += lf;
+            }
+            shear.offset = offset;
+        }
+    }
 }
 
 /// Wraps grain positions back into the periodic box after the drift.
@@ -69,6 +168,34 @@ pub fn wrap_positions(periodic: Res<PeriodicBox>, mut grains: Query<&mut Positio
     for mut p in grains.contiguous_iter_mut().expect("grain query is dense") {
         for p in p.bypass_change_detection().iter_mut() {
             p.0 = b.wrap(p.0);
+        }
+    }
+}
+
+/// The Lees–Edwards version of [`wrap_positions`], scheduled instead of it when the box
+/// is sheared: advances the image offset to the pass's time, then wraps each grain,
+/// moving position and velocity together through the gradient seam. Frozen grains are
+/// wrapped in position only (their velocity is prescribed).
+pub fn wrap_positions_sheared(
+    clock: Res<Clock>,
+    mut periodic: ResMut<PeriodicBox>,
+    mut grains: Query<(&mut Position, &mut Velocity, Has<Frozen>), With<Grain>>,
+) {
+    periodic.set_shear_time(clock.time);
+    let b = *periodic;
+    let Some(shear) = b.shear else {
+        return;
+    };
+    for (mut p, mut v, frozen) in &mut grains {
+        let (p, v) = (
+            &mut p.bypass_change_detection().0,
+            &mut v.bypass_change_detection().0,
+        );
+        if frozen {
+            let mut ignored = *v;
+            b.wrap_sheared(&shear, p, &mut ignored);
+        } else {
+            b.wrap_sheared(&shear, p, v);
         }
     }
 }
@@ -83,6 +210,7 @@ mod tests {
             lo: DVec3::new(0.0, -1.0, 0.0),
             hi: DVec3::new(1.0, 1.0, 5.0),
             axes: [true, true, false],
+            shear: None,
         };
         let d = b.min_image(DVec3::new(0.9, 1.5, 4.0));
         assert!((d - DVec3::new(-0.1, -0.5, 4.0)).length() < 1e-15, "{d:?}");
@@ -92,5 +220,43 @@ mod tests {
         assert_eq!(w, DVec3::new(0.0, -1.0, 0.0));
         let tiny = b.wrap(DVec3::new(-1e-18, 0.0, 0.0));
         assert!(tiny.x >= 0.0 && tiny.x < 1.0);
+    }
+
+    /// The sliding-brick geometry: the image of b one box up sits at b + L_g e_g + Δ e_f
+    /// and moves at γ̇ L_g; wrapping a grain through the seam lands it on its own image.
+    #[test]
+    fn sheared_images_and_wrap() {
+        let mut b = PeriodicBox {
+            lo: DVec3::ZERO,
+            hi: DVec3::new(1.0, 2.0, 1.0),
+            axes: [true, true, true],
+            shear: Some(LeesEdwards {
+                rate: 0.5,
+                flow: 0,
+                gradient: 1,
+                offset: 0.0,
+            }),
+        };
+        // Δ = γ̇ L_g t = 0.5 × 2 × 1.3 = 1.3 → 0.3 after reduction modulo L_f = 1.
+        b.set_shear_time(1.3);
+        let offset = b.shear.unwrap().offset;
+        assert!((offset - 0.3).abs() < 1e-12, "{offset}");
+        let a = DVec3::new(0.5, 1.95, 0.5);
+        let below = DVec3::new(0.3, 0.05, 0.5);
+        // Image of `below` one box up: (0.3 + 0.3, 2.05, 0.5) = (0.6, 2.05, 0.5).
+        let (d, w) = b.min_image_with_velocity(a - below);
+        assert!((d - DVec3::new(-0.1, -0.1, 0.0)).length() < 1e-12, "{d:?}");
+        assert_eq!(w, DVec3::new(1.0, 0.0, 0.0));
+        let (d, w) = b.min_image_with_velocity(below - a);
+        assert!((d - DVec3::new(0.1, 0.1, 0.0)).length() < 1e-12, "{d:?}");
+        assert_eq!(w, DVec3::new(-1.0, 0.0, 0.0));
+        // Crossing the top seam: shifted back by Δ along x and slowed by γ̇ L_g = 1.
+        let mut p = DVec3::new(0.2, 2.01, 0.5);
+        let mut v = DVec3::new(0.9, 0.1, 0.0);
+        let peculiar = v - b.streaming_velocity(p);
+        b.wrap_sheared(&b.shear.unwrap(), &mut p, &mut v);
+        assert!((p - DVec3::new(0.9, 0.01, 0.5)).length() < 1e-12, "{p:?}");
+        assert!((v - DVec3::new(-0.1, 0.1, 0.0)).length() < 1e-12, "{v:?}");
+        assert!((v - b.streaming_velocity(p) - peculiar).length() < 1e-12);
     }
 }

@@ -219,14 +219,24 @@ impl SimBuilder {
     }
 
     /// Makes the simulation periodic along the box's flagged axes: positions are wrapped
-    /// into the box after each drift, and pair separations take the nearest image.
+    /// into the box after each drift, and pair separations take the nearest image. A box
+    /// with Lees–Edwards shear gets the sheared wrap (which also advances the image
+    /// offset) instead of the plain one.
     pub fn periodic(&mut self, box_: crate::periodic::PeriodicBox) {
         self.world.insert_resource(box_);
-        self.add_system(
-            Stage::IntegratePositions,
-            "wrap_positions",
-            crate::periodic::wrap_positions,
-        );
+        if box_.shear.is_some() {
+            self.add_system(
+                Stage::IntegratePositions,
+                "wrap_positions_lees_edwards",
+                crate::periodic::wrap_positions_sheared,
+            );
+        } else {
+            self.add_system(
+                Stage::IntegratePositions,
+                "wrap_positions",
+                crate::periodic::wrap_positions,
+            );
+        }
     }
 
     /// Adds a system at the end of a stage, under a name shown in the plan.

@@ -82,6 +82,17 @@ impl GrainSnapshot {
         }
     }
 
+    /// Separation p_a − p_b (nearest image) and the velocity of that image of b beyond
+    /// b's own: nonzero only across a Lees–Edwards gradient seam. The pair's relative
+    /// velocity is v_a − v_b − (the image velocity).
+    #[inline]
+    pub fn separation_and_image_velocity(&self, a: DVec3, b: DVec3) -> (DVec3, DVec3) {
+        match &self.periodic {
+            Some(box_) => box_.min_image_with_velocity(a - b),
+            None => (a - b, DVec3::ZERO),
+        }
+    }
+
     /// Index of a wall entity in [`GrainSnapshot::walls`].
     pub fn wall_index(&self, entity: Entity) -> Option<usize> {
         self.walls.iter().position(|w| w.entity == entity)

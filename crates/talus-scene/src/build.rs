@@ -780,6 +780,20 @@ impl Scene {
             Some(spec) => Some(check_periodic(&cx, spec, &grains, two_d)?),
             None => None,
         };
+        if let Some(b) = periodic.filter(|b| b.shear.is_some()) {
+            if f.integrator == IntegratorName::Gear {
+                return Err(cx.err(
+                    "integrator",
+                    "VelocityVerlet or SymplecticEuler with Lees–Edwards shear (Gear's stored derivatives cannot follow a grain's velocity jump through the sheared seam)",
+                ));
+            }
+            let spec = f.periodic.as_ref().and_then(|p| p.shear.as_ref());
+            if spec.is_some_and(|s| s.start_on_profile) {
+                for g in grains.iter_mut().filter(|g| !g.frozen) {
+                    g.velocity += b.streaming_velocity(g.position);
+                }
+            }
+        }
         check_initial_overlaps(&cx, &grains, &walls, f.initial_overlap_tolerance)?;
         if let Some(b) = &periodic {
             check_overlaps_across_seams(&cx, &grains, b, f.initial_overlap_tolerance)?;
@@ -1053,6 +1067,16 @@ impl Scene {
                 .map(|a| ["x", "y", "z"][a])
                 .collect();
             builder.note(format!("periodic along {}", names.join(", ")));
+            if let Some(shear) = &b.shear {
+                let axis = |a: usize| ["x", "y", "z"][a];
+                builder.note(format!(
+                    "Lees–Edwards shear: rate {:e} /s, flow {}, gradient {} (images slide at {:.4e} m/s)",
+                    shear.rate,
+                    axis(shear.flow),
+                    axis(shear.gradient),
+                    shear.rate * b.length()[shear.gradient]
+                ));
+            }
         }
         // Stress sampling only when the scene asks for it: otherwise no system is added.
         if let (Some(spec), Some(regions)) = (&f.sampling, sampling_regions) {
@@ -1711,6 +1735,7 @@ fn check_periodic(
         lo: DVec3::ZERO,
         hi: DVec3::ONE,
         axes: [false; 3],
+        shear: None,
     };
     for (a, (name, extent)) in [("x", spec.x), ("y", spec.y), ("z", spec.z)]
         .into_iter()
@@ -1733,6 +1758,42 @@ fn check_periodic(
     }
     if !b.axes.iter().any(|&p| p) {
         return Err(cx.err("periodic", "at least one periodic axis: x, y or z"));
+    }
+    if let Some(shear) = &spec.shear {
+        let axis = |name: &str, field: &str| -> Result<usize, SceneError> {
+            let a = match name {
+                "x" => 0,
+                "y" => 1,
+                "z" => 2,
+                _ => {
+                    return Err(cx.err(field, format!("\"x\", \"y\" or \"z\", got \"{name}\"")));
+                }
+            };
+            if !b.axes[a] {
+                return Err(cx.err(
+                    field,
+                    format!("a periodic axis (Lees–Edwards shear needs `periodic.{name}`)"),
+                ));
+            }
+            Ok(a)
+        };
+        let flow = axis(&shear.flow, "periodic.shear.flow")?;
+        let gradient = axis(&shear.gradient, "periodic.shear.gradient")?;
+        if flow == gradient {
+            return Err(cx.err(
+                "periodic.shear.gradient",
+                "a gradient axis other than the flow axis",
+            ));
+        }
+        if !shear.rate.is_finite() {
+            return Err(cx.err("periodic.shear.rate", "a finite shear rate, 1/s"));
+        }
+        b.shear = Some(LeesEdwards {
+            rate: shear.rate,
+            flow,
+            gradient,
+            offset: 0.0,
+        });
     }
     for g in grains {
         for a in 0..3 {

@@ -488,6 +488,33 @@ pub struct PeriodicSpec {
     /// Extent of the z axis, if periodic (3-D scenes only).
     #[serde(default)]
     pub z: Option<(f64, f64)>,
+    /// Lees–Edwards simple shear between the periodic images along `gradient`. Default:
+    /// none (plain periodic box).
+    #[serde(default)]
+    pub shear: Option<ShearSpec>,
+}
+
+fn default_true_flag() -> bool {
+    true
+}
+
+/// Lees–Edwards shear of the periodic box:
+/// `shear: (rate: 10.0, flow: "x", gradient: "z")`. The images one box length up the
+/// gradient axis slide along the flow axis at `rate × L_gradient`, imposing the mean flow
+/// v_flow = rate × (x_gradient − middle of the box).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShearSpec {
+    /// Shear rate γ̇ = ∂v_flow/∂x_gradient, 1/s (either sign).
+    pub rate: f64,
+    /// Flow axis: "x", "y" or "z" (periodic).
+    pub flow: String,
+    /// Gradient axis: "x", "y" or "z" (periodic, not the flow axis).
+    pub gradient: String,
+    /// Add the streaming velocity to every grain's initial velocity, so that the run
+    /// starts on the shear profile instead of at rest. Default: true.
+    #[serde(default = "default_true_flag")]
+    pub start_on_profile: bool,
 }
 
 /// Stress sampling: `sampling: (interval: 0.01, domain: true, regions: [...])`.

@@ -51,6 +51,8 @@ pub enum ShearRateSource {
     Scene,
     /// Least-squares fit of the grain velocities against their positions.
     Fit,
+    /// The rate imposed by the scene's Lees–Edwards boundaries.
+    LeesEdwards,
 }
 
 /// The stress state of one region at one instant. Stresses are Cauchy stresses in Pa
@@ -80,7 +82,8 @@ pub struct RegionStress {
     pub stress: Tensor,
     /// Love–Weber contact (configurational) stress (1/V) Σ_c w_c f^c ⊗ l^c, Pa.
     pub contact_stress: Tensor,
-    /// Kinetic stress −(1/V) Σ_p m_p v′_p ⊗ v′_p, Pa.
+    /// Kinetic stress −(1/V) Σ_p m_p v′_p ⊗ v′_p, Pa (v′ the velocity less the region's
+    /// mean, and under Lees–Edwards shear less the streaming profile too).
     pub kinetic_stress: Tensor,
     /// Pressure p = −tr σ / D (D = 2 or 3, in-plane trace in 2-D), Pa; positive in
     /// compression.
@@ -298,6 +301,10 @@ pub fn sample_stress(
             s.centroid = s.first_moment / s.mass;
         }
     }
+    // Under Lees–Edwards shear the kinetic stress takes the peculiar velocity: less the
+    // streaming profile γ̇ (x_g − c_g) e_f, i.e. (the profile being linear) less the
+    // region's mean and γ̇ (x_g − x̄_g) e_f.
+    let shear = snapshot.periodic.and_then(|b| b.shear);
     // Second pass: fluctuations about the mean (two passes, not Σ m v v − M v̄ v̄, so
     // that a fast-moving region keeps its small fluctuations to full precision).
     for (p, v, _, m, _) in &grains {
@@ -308,7 +315,11 @@ pub fn sample_stress(
             }
             let dv = v.0 - s.mean_velocity;
             let dx = p.0 - s.centroid;
-            s.fluctuation.add_outer(dv, dv, m.0);
+            let mut peculiar = dv;
+            if let Some(shear) = &shear {
+                peculiar[shear.flow] -= shear.rate * dx[shear.gradient];
+            }
+            s.fluctuation.add_outer(peculiar, peculiar, m.0);
             s.spread.add_outer(dx, dx, m.0);
             s.velocity_position.add_outer(dv, dx, m.0);
         }
@@ -390,13 +401,28 @@ pub fn sample_stress(
         .zip(&settings.regions)
         .zip(sums.iter())
     {
-        finish_region(out, spec, s, dims, torques_carried);
+        finish_region(
+            out,
+            spec,
+            s,
+            dims,
+            torques_carried,
+            shear.map(|shear| shear.rate),
+        );
     }
     record.taken += 1;
 }
 
-/// Turns the sums of one region into its reported stresses.
-fn finish_region(out: &mut RegionStress, spec: &RegionSpec, s: &Sums, dims: usize, torques: bool) {
+/// Turns the sums of one region into its reported stresses. `imposed_rate` is the
+/// Lees–Edwards shear rate, used for regions that give none of their own.
+fn finish_region(
+    out: &mut RegionStress,
+    spec: &RegionSpec,
+    s: &Sums,
+    dims: usize,
+    torques: bool,
+    imposed_rate: Option<f64>,
+) {
     let boxes = s.boxes.expect("set by the sampler");
     let volume_box: Bounds = boxes.volume;
     let volume = volume_box.volume(dims);
@@ -443,9 +469,10 @@ fn finish_region(out: &mut RegionStress, spec: &RegionSpec, s: &Sums, dims: usiz
     if torques {
         out.couple_stress = Some(s.couple.scaled(1.0 / volume));
     }
-    let rate = match spec.shear_rate {
-        Some(rate) => Some((rate, ShearRateSource::Scene)),
-        None => fitted_shear_rate(spec, s, dims).map(|r| (r, ShearRateSource::Fit)),
+    let rate = match (spec.shear_rate, imposed_rate) {
+        (Some(rate), _) => Some((rate, ShearRateSource::Scene)),
+        (None, Some(rate)) => Some((rate.abs(), ShearRateSource::LeesEdwards)),
+        (None, None) => fitted_shear_rate(spec, s, dims).map(|r| (r, ShearRateSource::Fit)),
     };
     if let Some((rate, source)) = rate.filter(|(r, _)| r.is_finite()) {
         out.shear_rate = Some(rate);
