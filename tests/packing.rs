@@ -12,18 +12,7 @@ use talus::scene::packing::{Compression, Deposition};
 use talus::scene::state::SavedState;
 
 fn build(text: &str, resume: Option<&SavedState>) -> Simulation {
-    let scene = talus::scene::parse("packing.ron", text).unwrap_or_else(|e| panic!("{e}"));
-    let built = match resume {
-        Some(s) => scene.resume(&talus::registry(), s),
-        None => scene.build(&talus::registry()),
-    }
-    .unwrap_or_else(|e| panic!("{e}"));
-    let resumed = built.resumed;
-    let mut sim = built.builder.build();
-    if resumed {
-        sim.mark_primed();
-    }
-    sim
+    common::build_or_resume(text, resume)
 }
 
 /// Steps until the protocol asks to stop (or `limit` steps); returns the reason.

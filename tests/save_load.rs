@@ -62,18 +62,7 @@ fn periodic_rolling_gear(steps: u64) -> String {
 }
 
 fn build(text: &str, resume: Option<&SavedState>) -> Simulation {
-    let scene = talus::scene::parse("save-load.ron", text).unwrap_or_else(|e| panic!("{e}"));
-    let built = match resume {
-        Some(state) => scene.resume(&talus::registry(), state),
-        None => scene.build(&talus::registry()),
-    }
-    .unwrap_or_else(|e| panic!("{e}"));
-    let resumed = built.resumed;
-    let mut sim = built.builder.build();
-    if resumed {
-        sim.mark_primed();
-    }
-    sim
+    common::build_or_resume(text, resume)
 }
 
 /// The whole state as text: equal texts mean equal bits (floats are written in their

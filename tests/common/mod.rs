@@ -57,3 +57,20 @@ pub fn temp_dir(name: &str) -> std::path::PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+/// Builds a simulation from scene text, resumed from a saved state when one is given
+/// (then marked primed: its forces are the state's).
+pub fn build_or_resume(text: &str, resume: Option<&talus::scene::state::SavedState>) -> Simulation {
+    let scene = talus::scene::parse("test-scene.ron", text).unwrap_or_else(|e| panic!("{e}"));
+    let built = match resume {
+        Some(state) => scene.resume(&talus::registry(), state),
+        None => scene.build(&talus::registry()),
+    }
+    .unwrap_or_else(|e| panic!("{e}"));
+    let resumed = built.resumed;
+    let mut sim = built.builder.build();
+    if resumed {
+        sim.mark_primed();
+    }
+    sim
+}

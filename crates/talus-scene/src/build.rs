@@ -651,17 +651,7 @@ impl Scene {
                     if *count == 0 {
                         return Err(cx.err(&field("count"), "at least one grain"));
                     }
-                    match *radius {
-                        RadiusSpec::Fixed(r) if !positive(r) => {
-                            return Err(cx.err(&field("radius"), "a positive radius in metres"));
-                        }
-                        RadiusSpec::Uniform { min, max }
-                            if !(positive(min) && positive(max) && min <= max) =>
-                        {
-                            return Err(cx.err(&field("radius"), "radii with 0 < min ≤ max"));
-                        }
-                        _ => {}
-                    }
+                    check_radius(&cx, radius, &field("radius"))?;
                     if !(velocity_spread.is_finite() && *velocity_spread >= 0.0) {
                         return Err(cx.err(&field("velocity_spread"), "a non-negative speed"));
                     }
@@ -680,17 +670,7 @@ impl Scene {
             let field = |s: &str| format!("deposition.{s}");
             let mat = material_id(&d.material, &field("material"))?;
             check_region(&cx, &d.region, &field("region"), two_d)?;
-            match d.radius {
-                RadiusSpec::Fixed(r) if !positive(r) => {
-                    return Err(cx.err(&field("radius"), "a positive radius in metres"));
-                }
-                RadiusSpec::Uniform { min, max }
-                    if !(positive(min) && positive(max) && min <= max) =>
-                {
-                    return Err(cx.err(&field("radius"), "radii with 0 < min ≤ max"));
-                }
-                _ => {}
-            }
+            check_radius(&cx, &d.radius, &field("radius"))?;
             if d.batch_size == 0 || d.batches == 0 {
                 return Err(cx.err(
                     &field(if d.batch_size == 0 {
@@ -1608,6 +1588,16 @@ fn check_fields(
 fn region_name(r: &SamplingRegion) -> &str {
     match r {
         SamplingRegion::Box { name, .. } | SamplingRegion::Slab { name, .. } => name,
+    }
+}
+
+fn check_radius(cx: &Ctx, radius: &RadiusSpec, field: &str) -> Result<(), SceneError> {
+    match *radius {
+        RadiusSpec::Fixed(r) if !positive(r) => Err(cx.err(field, "a positive radius in metres")),
+        RadiusSpec::Uniform { min, max } if !(positive(min) && positive(max) && min <= max) => {
+            Err(cx.err(field, "radii with 0 < min ≤ max"))
+        }
+        _ => Ok(()),
     }
 }
 

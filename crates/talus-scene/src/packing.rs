@@ -52,10 +52,11 @@ pub struct Deposition {
 /// energies of the step are known).
 pub fn deposition(world: &mut World) {
     let step = world.resource::<Clock>().step;
-    let dep = world.resource::<Deposition>().clone();
-    if step == 0 || step % dep.check_every != 0 {
+    let check_every = world.resource::<Deposition>().check_every;
+    if step == 0 || step % check_every != 0 {
         return;
     }
+    let dep = world.resource::<Deposition>().clone();
     let mut q = world.query_filtered::<(), (With<Grain>, Without<Frozen>)>();
     let n = q.iter(world).count().max(1);
     let e = world.resource::<EnergySnapshot>();
@@ -157,16 +158,16 @@ impl Compression {
 /// Mean pressure p = (1/(D V)) Σ f·l of the contact (Love–Weber) stress in a periodic
 /// cell, with l the nearest-image branch from b to a and f the force on a.
 pub fn contact_pressure(world: &mut World, cell: &PeriodicBox, dims: usize) -> f64 {
-    let mut q = world.query::<(&Contact, &ContactGeometry, &ContactForce)>();
-    let pairs: Vec<(Entity, Entity, DVec3)> = q
-        .iter(world)
-        .filter(|(c, g, f)| c.kind == ContactKind::GrainGrain && f.is_active(g))
-        .map(|(c, _, f)| (c.a, c.b, f.force))
-        .collect();
+    let mut contacts = world.query::<(&Contact, &ContactGeometry, &ContactForce)>();
+    let mut positions = world.query::<&Position>();
+    let world = &*world;
     let mut virial = 0.0;
-    for (a, b, f) in pairs {
-        if let (Some(pa), Some(pb)) = (world.get::<Position>(a), world.get::<Position>(b)) {
-            virial += f.dot(cell.min_image(pa.0 - pb.0));
+    for (c, g, f) in contacts.iter(world) {
+        if c.kind != ContactKind::GrainGrain || !f.is_active(g) {
+            continue;
+        }
+        if let (Ok(pa), Ok(pb)) = (positions.get(world, c.a), positions.get(world, c.b)) {
+            virial += f.force.dot(cell.min_image(pa.0 - pb.0));
         }
     }
     let l = cell.length();
