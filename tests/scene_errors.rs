@@ -151,3 +151,42 @@ fn two_walls_with_one_name() {
         "{e}"
     );
 }
+
+#[test]
+fn strain_rate_wall_needs_a_facing_wall_by_name() {
+    let with_walls = |walls: &str| {
+        GOOD.replace(
+            "    grains:",
+            &format!("    walls: [{walls}],\n    grains:"),
+        )
+    };
+    let floor = r#"Plane(name: "floor", point: (0.0, 0.0, -0.1), normal: (0.0, 0.0, 1.0), material: "glass")"#;
+    // An unknown opposite wall.
+    let text = with_walls(&format!(
+        r#"{floor}, Plane(name: "lid", point: (0.0, 0.0, 0.1), normal: (0.0, 0.0, -1.0), material: "glass", strain_rate: (rate: 1.0, opposite: "flor"))"#
+    ));
+    let e = error_of(&text);
+    assert_eq!(e.field, "walls[1].strain_rate.opposite", "{e}");
+    assert!(e.expected.contains("`floor`"), "{e}");
+    assert_eq!(e.line, line_col_of(&text, "opposite: \"flor\"").0, "{e}");
+    // A wall that does not face it.
+    let text = with_walls(&format!(
+        r#"{floor}, Plane(name: "side", point: (0.1, 0.0, 0.0), normal: (-1.0, 0.0, 0.0), material: "glass", strain_rate: (rate: 1.0, opposite: "floor"))"#
+    ));
+    let e = error_of(&text);
+    assert_eq!(e.field, "walls[1].strain_rate.opposite", "{e}");
+    assert!(e.expected.contains("facing"), "{e}");
+    // Both a servo and a strain rate.
+    let text = with_walls(&format!(
+        r#"{floor}, Plane(name: "lid", point: (0.0, 0.0, 0.1), normal: (0.0, 0.0, -1.0), material: "glass", servo: (pressure: 1.0, area: 1.0, gain: 1.0), strain_rate: (rate: 1.0, opposite: "floor"))"#
+    ));
+    let e = error_of(&text);
+    assert_eq!(e.field, "walls[1].strain_rate", "{e}");
+    // Two walls driven against each other at different rates.
+    let text = with_walls(
+        r#"Plane(name: "floor", point: (0.0, 0.0, -0.1), normal: (0.0, 0.0, 1.0), material: "glass", strain_rate: (rate: 2.0, opposite: "lid")), Plane(name: "lid", point: (0.0, 0.0, 0.1), normal: (0.0, 0.0, -1.0), material: "glass", strain_rate: (rate: 1.0, opposite: "floor"))"#,
+    );
+    let e = error_of(&text);
+    assert!(e.field.ends_with("strain_rate.rate"), "{e}");
+    assert!(e.expected.contains("same rate"), "{e}");
+}

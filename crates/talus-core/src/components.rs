@@ -160,6 +160,20 @@ pub struct Servo {
     pub max_speed: f64,
 }
 
+/// A wall moved at a set strain rate against an opposite, parallel wall: along its
+/// normal at about `share · rate · L`, L the current gap between the two planes, so that
+/// the gap follows L̇ = −rate · L (positive rate compresses, negative extends). When both
+/// walls of the pair are driven, each has `share` ½.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct StrainRateDrive {
+    /// True strain rate of the gap, 1/s (compression positive).
+    pub rate: f64,
+    /// The wall the gap is measured to.
+    pub opposite: Entity,
+    /// Part of the gap's rate this wall makes: 1, or ½ when the opposite wall is driven too.
+    pub share: f64,
+}
+
 /// All components of one wall.
 #[derive(Bundle, Clone, Debug)]
 pub struct WallBundle {

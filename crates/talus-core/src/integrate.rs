@@ -172,6 +172,35 @@ pub fn servo_walls(mut walls: Query<(&mut Wall, &WallLoad, &Servo)>) {
     }
 }
 
+/// Strain-rate walls: each step the wall moves along its normal by share × L(1 − e^{−rate·dt}),
+/// L the gap between its plane and its opposite's at the start of the step, so that the
+/// gap follows L(t) = L₀ e^{−rate·t} exactly at the step times (not just to O(dt)).
+/// Scheduled only when a wall has one.
+pub fn strain_rate_walls(
+    clock: Res<Clock>,
+    drives: Query<(Entity, &StrainRateDrive)>,
+    mut walls: Query<&mut Wall>,
+) {
+    let dt = clock.pass_dt;
+    for (entity, drive) in &drives {
+        let gap = match (walls.get(entity), walls.get(drive.opposite)) {
+            (Ok(wall), Ok(opposite)) => (wall.point - opposite.point).dot(opposite.normal),
+            _ => continue,
+        };
+        // (1 − e^{−rate·dt})/dt, the rate of the exact exponential over one step; rate itself
+        // for a pass without a step.
+        let mean_rate = if dt > 0.0 {
+            -(-drive.rate * dt).exp_m1() / dt
+        } else {
+            drive.rate
+        };
+        if let Ok(mut wall) = walls.get_mut(entity) {
+            let n = wall.normal;
+            wall.velocity = n * (drive.share * mean_rate * gap);
+        }
+    }
+}
+
 /// Prescribed wall motion: point += dt · velocity.
 pub fn move_walls(clock: Res<Clock>, mut walls: Query<&mut Wall>) {
     let dt = clock.pass_dt;

@@ -18,6 +18,93 @@ use crate::Scene;
 /// Name under which the whole domain is reported when `sampling.domain` is true.
 pub const DOMAIN_REGION: &str = "domain";
 
+/// A strain-rate drive resolved against the built walls (indices among them).
+struct ResolvedStrainDrive {
+    wall: usize,
+    opposite: usize,
+    rate: f64,
+    share: f64,
+}
+
+/// Finds each strain-rate wall's opposite wall by name and checks the pair: a different,
+/// parallel, facing wall at a positive gap; when both walls of a pair are driven against
+/// each other they must share one rate, and each then makes half of it.
+fn resolve_strain_drives(
+    cx: &Ctx,
+    walls: &[(usize, WallBundle)],
+    drives: &[(usize, usize, &StrainRateSpec)],
+) -> Result<Vec<ResolvedStrainDrive>, SceneError> {
+    let mut resolved = Vec::with_capacity(drives.len());
+    for &(i, k, spec) in drives {
+        let field = format!("walls[{k}].strain_rate.opposite");
+        let names = || {
+            walls
+                .iter()
+                .map(|(_, w)| format!("`{}`", w.wall.name))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let Some(j) = walls.iter().position(|(_, w)| w.wall.name == spec.opposite) else {
+            return Err(cx.err(
+                &field,
+                format!("the name of another wall, one of {}", names()),
+            ));
+        };
+        if j == i {
+            return Err(cx.err(&field, "another wall than this one"));
+        }
+        let (me, other) = (&walls[i].1.wall, &walls[j].1.wall);
+        if (me.normal + other.normal).length() > 1e-9 {
+            return Err(cx.err(
+                &field,
+                format!(
+                    "a wall facing this one (normals opposite); `{}` has normal ({}, {}, {}), this wall ({}, {}, {})",
+                    other.name,
+                    other.normal.x,
+                    other.normal.y,
+                    other.normal.z,
+                    me.normal.x,
+                    me.normal.y,
+                    me.normal.z
+                ),
+            ));
+        }
+        let gap = (me.point - other.point).dot(other.normal);
+        if !(gap > 0.0) {
+            return Err(cx.err(
+                &field,
+                format!(
+                    "a wall on the far side of the grains (the gap to `{}` is {gap:e} m)",
+                    other.name
+                ),
+            ));
+        }
+        let mutual = drives
+            .iter()
+            .find(|&&(i2, _, s2)| i2 == j && s2.opposite == me.name);
+        let share = match mutual {
+            Some(&(_, k2, s2)) if s2.rate != spec.rate => {
+                return Err(cx.err(
+                    &format!("walls[{k}].strain_rate.rate"),
+                    format!(
+                        "the same rate as walls[{k2}], which is driven against this wall ({} against {} 1/s)",
+                        s2.rate, spec.rate
+                    ),
+                ));
+            }
+            Some(_) => 0.5,
+            None => 1.0,
+        };
+        resolved.push(ResolvedStrainDrive {
+            wall: i,
+            opposite: j,
+            rate: spec.rate,
+            share,
+        });
+    }
+    Ok(resolved)
+}
+
 /// Most plane walls a scene may have (the narrow phase encodes wall indices in the
 /// top of the grain-index range).
 pub const MAX_WALLS: usize = 1024;
@@ -306,6 +393,8 @@ impl Scene {
         // Walls.
         let mut walls = Vec::new();
         let mut servos: Vec<(usize, Servo)> = Vec::new();
+        // (index among the built walls, walls[k] of the scene, spec).
+        let mut strain_drives: Vec<(usize, usize, &StrainRateSpec)> = Vec::new();
         for (k, w) in f.walls.iter().enumerate() {
             let field = |s: &str| format!("walls[{k}].{s}");
             match w {
@@ -316,7 +405,28 @@ impl Scene {
                     material,
                     velocity,
                     servo,
+                    strain_rate,
                 } => {
+                    if let Some(sr) = strain_rate {
+                        if !sr.rate.is_finite() {
+                            return Err(
+                                cx.err(&field("strain_rate.rate"), "a finite strain rate in 1/s")
+                            );
+                        }
+                        if servo.is_some() {
+                            return Err(cx.err(
+                                &field("strain_rate"),
+                                "either a servo or a strain rate on a wall, not both",
+                            ));
+                        }
+                        if *velocity != [0.0; 3] {
+                            return Err(cx.err(
+                                &field("velocity"),
+                                "no velocity on a strain-rate wall (the strain rate sets it)",
+                            ));
+                        }
+                        strain_drives.push((walls.len(), k, sr));
+                    }
                     if let Some(sv) = servo {
                         let positive = |x: f64| x.is_finite() && x > 0.0;
                         if !(sv.pressure.is_finite() && sv.pressure >= 0.0) {
@@ -451,6 +561,8 @@ impl Scene {
                 ));
             }
         }
+
+        let strain_drives = resolve_strain_drives(&cx, &walls, &strain_drives)?;
 
         // A saved state to start from or to resume.
         let start_state = match (resume, &f.start_from) {
@@ -1250,10 +1362,32 @@ impl Scene {
                 talus_core::integrate::servo_walls,
             );
         }
-        for (k, (_, w)) in walls.into_iter().enumerate() {
-            let mut entity = builder.world.spawn(w);
-            if let Some((_, servo)) = servos.iter().find(|(i, _)| *i == k) {
-                entity.insert(*servo);
+        let wall_entities: Vec<Entity> = walls
+            .into_iter()
+            .enumerate()
+            .map(|(k, (_, w))| {
+                let mut entity = builder.world.spawn(w);
+                if let Some((_, servo)) = servos.iter().find(|(i, _)| *i == k) {
+                    entity.insert(*servo);
+                }
+                entity.id()
+            })
+            .collect();
+        if !strain_drives.is_empty() {
+            builder.add_system(
+                Stage::Prepare,
+                "strain_rate_walls",
+                talus_core::integrate::strain_rate_walls,
+            );
+            for d in &strain_drives {
+                builder
+                    .world
+                    .entity_mut(wall_entities[d.wall])
+                    .insert(StrainRateDrive {
+                        rate: d.rate,
+                        opposite: wall_entities[d.opposite],
+                        share: d.share,
+                    });
             }
         }
         let grain_count = grains.len();

@@ -296,6 +296,10 @@ pub enum WallSpec {
         /// Hold a pressure instead of a velocity. Default: none.
         #[serde(default)]
         servo: Option<ServoSpec>,
+        /// Move at a set strain rate against an opposite wall instead of a velocity.
+        /// Default: none.
+        #[serde(default)]
+        strain_rate: Option<StrainRateSpec>,
     },
     /// The inner faces of an axis-aligned box: 6 planes (4 in 2-D).
     Box {
@@ -472,6 +476,18 @@ pub struct ServoSpec {
     /// Largest wall speed, m/s. Default: unbounded.
     #[serde(default)]
     pub max_speed: Option<f64>,
+}
+
+/// A plane wall moved at a set strain rate: `strain_rate: (rate: 0.1, opposite: "z_min")`.
+/// The gap L to the opposite (parallel, facing) wall then follows L̇ = −rate · L.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StrainRateSpec {
+    /// True strain rate of the gap, 1/s: positive compresses, negative extends.
+    pub rate: f64,
+    /// Name of the opposite wall the gap is measured to (a plane's name or a box face
+    /// such as "z_min").
+    pub opposite: String,
 }
 
 /// Periodic boundaries: `periodic: (x: (0.0, 0.1), y: (0.0, 0.1))`. Each axis given is
