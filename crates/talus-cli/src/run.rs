@@ -237,6 +237,9 @@ pub fn run_scene(
                     .settle_kinetic_energy
                     .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
                 samples.push(sample);
+                // Drop the old copy first: two whole states at once would double the
+                // run's peak memory.
+                drop(last_good.take());
                 last_good = Some(SavedState::capture(&mut sim.world, &built.name));
                 if let Some(reason) = requested {
                     stopped = reason;
