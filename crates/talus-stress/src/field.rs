@@ -117,7 +117,8 @@ pub struct FieldSample {
     pub cell_volume: f64,
     /// Mass density ρ, kg/m³.
     pub density: Vec<f64>,
-    /// Momentum density p, kg/(m² s).
+    /// Momentum density p = Σ m v φ, kg/(m² s); across a Lees–Edwards gradient seam a
+    /// node sees the grain's image there, with its velocity v ± γ̇ L_g along the flow.
     pub momentum: Vec<[f64; 3]>,
     /// Velocity V = p / ρ, m/s (0 where ρ = 0).
     pub velocity: Vec<[f64; 3]>,
@@ -161,10 +162,10 @@ impl Axis {
     /// The kernel's weights along this axis for a point at `x`: (node, weight / m,
     /// periods) with Σ weight × cell = 1 exactly up to rounding; `periods` is how many box
     /// lengths the node's unwrapped position lies above the box (−1 below it, 0 inside),
-    /// i.e. the node sees the point's image shifted by −periods box lengths. Nodes within the cut-off get
-    /// exp(−d²/2w²), d the distance to the point (along a periodic axis to each of its
-    /// images within reach, which wraps the kernel round the seam); the weights are then
-    /// divided by their sum × cell. Where no node is within reach (a point farther than
+    /// i.e. the node sees the point's image shifted by −periods box lengths. Nodes within
+    /// the cut-off get exp(−d²/2w²), d the distance to the point (along a periodic axis to
+    /// each of its images within reach, which wraps the kernel round the seam); the
+    /// weights are then divided by their sum × cell. Where no node is within reach (a point farther than
     /// the cut-off outside the grid, or a width below a sixth of a cell), the nearest
     /// node takes it all.
     fn weights(&self, x: f64, out: &mut Vec<(usize, f64, i64)>) {
@@ -414,10 +415,15 @@ pub fn sample_fields(
             DVec3::ZERO
         };
         for (p, v, _, m) in &grains {
+            let own = v.0 - reference;
             FieldScratch::deposit(&axes, weights, shear, p.0, |n, phi, k| {
                 // A node across the sheared seam sees the image k periods down, which
                 // moves at v − k γ̇ L_g e_f.
-                let dv = v.0 - k as f64 * image_velocity - reference;
+                let dv = if k == 0 {
+                    own
+                } else {
+                    v.0 - k as f64 * image_velocity - reference
+                };
                 let mphi = m.0 * phi;
                 density[n] += mphi;
                 relative_momentum[n] += mphi * dv;
