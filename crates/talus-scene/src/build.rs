@@ -880,7 +880,10 @@ impl Scene {
                 ));
             }
             let spec = f.periodic.as_ref().and_then(|p| p.shear.as_ref());
-            if spec.is_some_and(|s| s.start_on_profile) {
+            // A resumed run's velocities are the saved ones, already on the profile:
+            // adding it again would double the streaming velocity.
+            let resuming = matches!(restore, Some((_, RestoreMode::Resume)));
+            if spec.is_some_and(|s| s.start_on_profile) && !resuming {
                 for g in grains.iter_mut().filter(|g| !g.frozen) {
                     g.velocity += b.streaming_velocity(g.position);
                 }

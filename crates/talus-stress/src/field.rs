@@ -117,7 +117,8 @@ pub struct FieldSample {
     pub cell_volume: f64,
     /// Mass density ρ, kg/m³.
     pub density: Vec<f64>,
-    /// Momentum density p, kg/(m² s).
+    /// Momentum density p = Σ m v φ, kg/(m² s); across a Lees–Edwards gradient seam a
+    /// node sees the grain's image there, with its velocity v ± γ̇ L_g along the flow.
     pub momentum: Vec<[f64; 3]>,
     /// Velocity V = p / ρ, m/s (0 where ρ = 0).
     pub velocity: Vec<[f64; 3]>,
@@ -158,17 +159,19 @@ struct Axis {
 }
 
 impl Axis {
-    /// The kernel's weights along this axis for a point at `x`: (node, weight / m) with
-    /// Σ weight × cell = 1 exactly up to rounding. Nodes within the cut-off get
-    /// exp(−d²/2w²), d the distance to the point (along a periodic axis to each of its
-    /// images within reach, which wraps the kernel round the seam); the weights are then
-    /// divided by their sum × cell. Where no node is within reach (a point farther than
+    /// The kernel's weights along this axis for a point at `x`: (node, weight / m,
+    /// periods) with Σ weight × cell = 1 exactly up to rounding; `periods` is how many box
+    /// lengths the node's unwrapped position lies above the box (−1 below it, 0 inside),
+    /// i.e. the node sees the point's image shifted by −periods box lengths. Nodes within
+    /// the cut-off get exp(−d²/2w²), d the distance to the point (along a periodic axis to
+    /// each of its images within reach, which wraps the kernel round the seam); the
+    /// weights are then divided by their sum × cell. Where no node is within reach (a point farther than
     /// the cut-off outside the grid, or a width below a sixth of a cell), the nearest
     /// node takes it all.
-    fn weights(&self, x: f64, out: &mut Vec<(usize, f64)>) {
+    fn weights(&self, x: f64, out: &mut Vec<(usize, f64, i64)>) {
         out.clear();
         if self.flat {
-            out.push((0, 1.0 / self.cell));
+            out.push((0, 1.0 / self.cell, 0));
             return;
         }
         let reach = CUTOFF_WIDTHS * self.width;
@@ -187,22 +190,22 @@ impl Axis {
             }
             let g = (-0.5 * (d / self.width).powi(2)).exp();
             sum += g;
-            out.push((i.rem_euclid(n) as usize, g));
+            out.push((i.rem_euclid(n) as usize, g, i.div_euclid(n)));
         }
         if sum > 0.0 {
             let scale = 1.0 / (sum * self.cell);
-            for (_, w) in out.iter_mut() {
+            for (_, w, _) in out.iter_mut() {
                 *w *= scale;
             }
         } else {
             out.clear();
             let i = ((x - self.min) / self.cell).floor() as i64;
-            let i = if self.periodic {
-                i.rem_euclid(n)
+            let (i, periods) = if self.periodic {
+                (i.rem_euclid(n), i.div_euclid(n))
             } else {
-                i.clamp(0, n - 1)
+                (i.clamp(0, n - 1), 0)
             };
-            out.push((i as usize, 1.0 / self.cell));
+            out.push((i as usize, 1.0 / self.cell, periods));
         }
     }
 }
@@ -216,28 +219,80 @@ pub struct FieldScratch {
     /// Σ m (v − u) ⊗ (v − u) φ.
     relative_flux: Vec<Tensor>,
     contact: Vec<Tensor>,
-    weights: [Vec<(usize, f64)>; 3],
+    weights: KernelWeights,
+}
+
+/// The Lees–Edwards seam as the kernel sees it: across the gradient seam a node sees the
+/// image of a point shifted by ∓Δ along the flow axis.
+#[derive(Clone, Copy, Debug)]
+struct KernelShear {
+    flow: usize,
+    gradient: usize,
+    /// Offset Δ of the image one period up the gradient axis, m.
+    offset: f64,
+}
+
+/// Per-axis kernel weights of one point, and under shear the flow-axis weights of its
+/// images one period down, in place and one period up the gradient axis.
+#[derive(Default)]
+struct KernelWeights {
+    axes: [Vec<(usize, f64, i64)>; 3],
+    /// Flow-axis weights at x_f − k Δ for k = −1, 0, 1 (entries k + 1).
+    flow_images: [Vec<(usize, f64, i64)>; 3],
 }
 
 impl FieldScratch {
-    /// Calls `add(node, φ(node − x))` for every node in reach of `x`; the weights φ sum
-    /// to 1 / cell volume.
+    /// Calls `add(node, φ(node − x), k)` for every node in reach of `x`; the weights φ
+    /// sum to 1 / cell volume. Under Lees–Edwards shear a node across the gradient seam
+    /// sees the image of `x` k periods down (k = ±1: at x − k (L_g e_g + Δ e_f)), so its
+    /// flow-axis weight is taken at x_f − k Δ; k = 0 elsewhere and without shear.
     fn deposit(
         axes: &[Axis; 3],
-        weights: &mut [Vec<(usize, f64)>; 3],
+        weights: &mut KernelWeights,
+        shear: Option<KernelShear>,
         x: DVec3,
-        mut add: impl FnMut(usize, f64),
+        mut add: impl FnMut(usize, f64, i64),
     ) {
-        for d in 0..3 {
-            axes[d].weights(x[d], &mut weights[d]);
-        }
         let (nx, ny) = (axes[0].cells, axes[1].cells);
-        for &(k, wz) in &weights[2] {
-            for &(j, wy) in &weights[1] {
-                let wyz = wy * wz;
-                let row = nx * (j + ny * k);
-                for &(i, wx) in &weights[0] {
-                    add(row + i, wx * wyz);
+        let Some(shear) = shear else {
+            for d in 0..3 {
+                axes[d].weights(x[d], &mut weights.axes[d]);
+            }
+            let w = &weights.axes;
+            for &(k, wz, _) in &w[2] {
+                for &(j, wy, _) in &w[1] {
+                    let wyz = wy * wz;
+                    let row = nx * (j + ny * k);
+                    for &(i, wx, _) in &w[0] {
+                        add(row + i, wx * wyz, 0);
+                    }
+                }
+            }
+            return;
+        };
+        let (f, g) = (shear.flow, shear.gradient);
+        let other = 3 - f - g;
+        axes[g].weights(x[g], &mut weights.axes[g]);
+        axes[other].weights(x[other], &mut weights.axes[other]);
+        // The flow weights of each image the gradient nodes see (the kernel reaches less
+        // than half a period, so at most one seam: k ∈ {−1, 0, 1}).
+        for k in -1..=1i64 {
+            let list = &mut weights.flow_images[(k + 1) as usize];
+            list.clear();
+            if weights.axes[g].iter().any(|e| e.2 == k) {
+                axes[f].weights(x[f] - k as f64 * shear.offset, list);
+            }
+        }
+        let mut node = [0usize; 3];
+        for &(jg, wg, k) in &weights.axes[g] {
+            node[g] = jg;
+            let flow = &weights.flow_images[(k.clamp(-1, 1) + 1) as usize];
+            for &(jo, wo, _) in &weights.axes[other] {
+                node[other] = jo;
+                let wgo = wg * wo;
+                for &(jf, wf, _) in flow {
+                    node[f] = jf;
+                    add(node[0] + nx * (node[1] + ny * node[2]), wf * wgo, k);
                 }
             }
         }
@@ -308,6 +363,22 @@ pub fn sample_fields(
         cells[2] = 1;
     }
     let periodic = snapshot.periodic.map_or([false; 3], |b| b.axes);
+    let shear = snapshot.periodic.and_then(|b| {
+        b.shear.map(|s| KernelShear {
+            flow: s.flow,
+            gradient: s.gradient,
+            offset: s.offset,
+        })
+    });
+    // The velocity of the image one period up the gradient axis beyond the grain's own,
+    // γ̇ L_g e_f (zero without shear).
+    let image_velocity = snapshot.periodic.map_or(DVec3::ZERO, |b| {
+        b.shear.map_or(DVec3::ZERO, |s| {
+            let mut w = DVec3::ZERO;
+            w[s.flow] = s.rate * b.length()[s.gradient];
+            w
+        })
+    });
     let axes: [Axis; 3] = std::array::from_fn(|d| Axis {
         min: domain.min[d],
         cell: (domain.max[d] - domain.min[d]) / cells[d] as f64,
@@ -344,8 +415,15 @@ pub fn sample_fields(
             DVec3::ZERO
         };
         for (p, v, _, m) in &grains {
-            let dv = v.0 - reference;
-            FieldScratch::deposit(&axes, weights, p.0, |n, phi| {
+            let own = v.0 - reference;
+            FieldScratch::deposit(&axes, weights, shear, p.0, |n, phi, k| {
+                // A node across the sheared seam sees the image k periods down, which
+                // moves at v − k γ̇ L_g e_f.
+                let dv = if k == 0 {
+                    own
+                } else {
+                    v.0 - k as f64 * image_velocity - reference
+                };
                 let mphi = m.0 * phi;
                 density[n] += mphi;
                 relative_momentum[n] += mphi * dv;
@@ -378,7 +456,7 @@ pub fn sample_fields(
                 for (s, w) in GAUSS_NODES.iter().zip(GAUSS_WEIGHTS) {
                     let t = (piece as f64 + s) / pieces as f64;
                     let weight = w / pieces as f64;
-                    FieldScratch::deposit(&axes, weights, xa + t * branch, |n, phi| {
+                    FieldScratch::deposit(&axes, weights, shear, xa + t * branch, |n, phi, _| {
                         contact[n].add_outer(f.force, branch, weight * phi);
                     });
                 }
@@ -470,16 +548,16 @@ mod tests {
         let mut out = Vec::new();
         for x in [0.0, 0.01, 0.55, 0.99, -0.02, 1.03] {
             axis.weights(x, &mut out);
-            let total: f64 = out.iter().map(|(_, w)| w * axis.cell).sum();
+            let total: f64 = out.iter().map(|(_, w, _)| w * axis.cell).sum();
             assert!((total - 1.0).abs() < 1e-15, "{x}: {total}");
             // Near the seam both ends of the grid take a share.
             if x < 0.02 || x > 0.98 {
-                assert!(out.iter().any(|(i, _)| *i == 0) && out.iter().any(|(i, _)| *i == 9));
+                assert!(out.iter().any(|(i, _, _)| *i == 0) && out.iter().any(|(i, _, _)| *i == 9));
             }
         }
         // Symmetric about a point midway between nodes across the seam.
         axis.weights(0.0, &mut out);
-        let weight_of = |i: usize| out.iter().find(|(k, _)| *k == i).unwrap().1;
+        let weight_of = |i: usize| out.iter().find(|(k, _, _)| *k == i).unwrap().1;
         assert!((weight_of(0) - weight_of(9)).abs() < 1e-12);
         assert!((weight_of(1) - weight_of(8)).abs() < 1e-12);
 
@@ -490,9 +568,9 @@ mod tests {
         };
         for x in [0.0, 0.001, 1.0, 1.2, -5.0] {
             bounded.weights(x, &mut out);
-            let total: f64 = out.iter().map(|(_, w)| w * bounded.cell).sum();
+            let total: f64 = out.iter().map(|(_, w, _)| w * bounded.cell).sum();
             assert!((total - 1.0).abs() < 1e-15, "{x}: {total}");
-            assert!(out.iter().all(|(i, _)| *i < 10));
+            assert!(out.iter().all(|(i, _, _)| *i < 10));
         }
     }
 
@@ -510,7 +588,7 @@ mod tests {
         axis.weights(1.0, &mut out);
         // Node spacing w/5: the sampled Gaussian cut at 3 w sums to √(2π) w / cell × (1 −
         // 2.7e-3) within 1e-12; the normalised weights then match φ to that factor.
-        let (i, w) = out.iter().find(|(i, _)| *i == 99).copied().unwrap();
+        let (i, w, _) = out.iter().find(|(i, _, _)| *i == 99).copied().unwrap();
         let d = (i as f64 + 0.5) * axis.cell - 1.0;
         let gauss = (-0.5 * (d / axis.width).powi(2)).exp()
             / ((2.0 * std::f64::consts::PI).sqrt() * axis.width);
@@ -519,6 +597,75 @@ mod tests {
             (w * truncation / gauss - 1.0).abs() < 1e-3,
             "{w} vs {gauss}"
         );
+    }
+
+    #[test]
+    fn across_the_sheared_seam_a_node_sees_the_image_shifted_along_the_flow() {
+        // 2-D, flow x over [0, 1), gradient y over [0, 2), 10 × 20 cells of 0.1, w = 0.07,
+        // offset Δ = 0.3. A point at (0.5, 1.98): the nodes past the top face (wrapped to
+        // the bottom rows) see its image one period down, at (0.2, −0.02).
+        let axis = |cells: usize, periodic: bool, flat: bool| Axis {
+            min: if flat { -0.5 } else { 0.0 },
+            cell: if flat { 1.0 } else { 0.1 },
+            cells,
+            periodic,
+            flat,
+            width: 0.07,
+        };
+        let axes = [
+            axis(10, true, false),
+            axis(20, true, false),
+            axis(1, false, true),
+        ];
+        let shear = KernelShear {
+            flow: 0,
+            gradient: 1,
+            offset: 0.3,
+        };
+        let mut weights = KernelWeights::default();
+        let mut deposits = Vec::new();
+        FieldScratch::deposit(
+            &axes,
+            &mut weights,
+            Some(shear),
+            DVec3::new(0.5, 1.98, 0.0),
+            |n, phi, k| deposits.push((n, phi, k)),
+        );
+        let cell_volume = 0.1 * 0.1 * 1.0;
+        let total: f64 = deposits.iter().map(|d| d.1).sum::<f64>() * cell_volume;
+        assert!((total - 1.0).abs() < 1e-15, "{total}");
+        // Per image: the share and the mean node position along x.
+        for (k, centre, rows) in [(0i64, 0.5, 14..20), (1, 0.2, 0..3)] {
+            let mine: Vec<_> = deposits.iter().filter(|d| d.2 == k).collect();
+            assert!(!mine.is_empty());
+            let share: f64 = mine.iter().map(|d| d.1).sum();
+            let mean_x: f64 = mine
+                .iter()
+                .map(|d| d.1 * ((d.0 % 10) as f64 + 0.5) * 0.1)
+                .sum::<f64>()
+                / share;
+            // Nodes at 0.05 + 0.1 i are symmetric about 0.5 and about 0.2 (both halfway
+            // between two nodes), and the kernel does not reach round the flow axis.
+            assert!((mean_x - centre).abs() < 1e-12, "k = {k}: {mean_x}");
+            assert!(mine.iter().all(|d| rows.contains(&(d.0 / 10))), "k = {k}");
+        }
+        // Without shear the bottom rows see the plain image, centred at x = 0.5.
+        deposits.clear();
+        FieldScratch::deposit(
+            &axes,
+            &mut weights,
+            None,
+            DVec3::new(0.5, 1.98, 0.0),
+            |n, phi, k| deposits.push((n, phi, k)),
+        );
+        let bottom: Vec<_> = deposits.iter().filter(|d| d.0 / 10 < 3).collect();
+        let share: f64 = bottom.iter().map(|d| d.1).sum();
+        let mean_x: f64 = bottom
+            .iter()
+            .map(|d| d.1 * ((d.0 % 10) as f64 + 0.5) * 0.1)
+            .sum::<f64>()
+            / share;
+        assert!((mean_x - 0.5).abs() < 1e-12);
     }
 
     /// erf(3/√2), the mass of a Gaussian within 3 standard deviations.

@@ -35,7 +35,7 @@ pub use field::{
     CoarseGrainingPlugin, FIELD_SYSTEM_NAME, FieldRecord, FieldSample, FieldSettings, FieldSpec,
     sample_fields,
 };
-pub use region::{Bounds, RegionKind, RegionShape, RegionSpec, Seams};
+pub use region::{Bounds, RegionKind, RegionShape, RegionSpec, Seams, ShearedSeam};
 pub use sample::{
     FlowRegime, GAS_LIKE_LIMIT, QUASI_STATIC_LIMIT, RegionStress, ShearRateSource, StressRecord,
     StressSample, StressScratch, StressSettings, sample_stress,

@@ -152,12 +152,29 @@ const IMAGE_SHIFTS: [f64; 3] = [-1.0, 0.0, 1.0];
 
 /// The periodic axes of a sample and their lengths: along them a region is repeated
 /// every box length, so that it holds the grains and branch parts of its images too.
+/// Under Lees–Edwards shear the images one period up the gradient axis are also shifted
+/// by the offset Δ along the flow axis (sliding bricks): the image lattice is spanned by
+/// L_g e_g + Δ e_f and the box lengths along the other axes.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Seams {
     /// Which axes are periodic.
     pub axes: [bool; 3],
     /// Box length along each periodic axis, m (unused along the others).
     pub length: DVec3,
+    /// The sheared seam, when the box is sheared by Lees–Edwards boundaries.
+    pub shear: Option<ShearedSeam>,
+}
+
+/// The Lees–Edwards seam of a sheared box, as the regions see it: the geometry of the
+/// images at the instant of the sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShearedSeam {
+    /// Flow axis f.
+    pub flow: usize,
+    /// Gradient axis g (≠ f).
+    pub gradient: usize,
+    /// Offset Δ of the image one period up the gradient axis, along the flow axis, m.
+    pub offset: f64,
 }
 
 impl Seams {
@@ -165,13 +182,19 @@ impl Seams {
     pub const NONE: Seams = Seams {
         axes: [false; 3],
         length: DVec3::ZERO,
+        shear: None,
     };
 
-    /// The seams of a periodic box, if there is one.
+    /// The seams of a periodic box, if there is one, with its Lees–Edwards offset.
     pub fn of(periodic: Option<&PeriodicBox>) -> Seams {
         periodic.map_or(Seams::NONE, |b| Seams {
             axes: b.axes,
             length: b.length(),
+            shear: b.shear.map(|s| ShearedSeam {
+                flow: s.flow,
+                gradient: s.gradient,
+                offset: s.offset,
+            }),
         })
     }
 
@@ -180,13 +203,59 @@ impl Seams {
     fn repeats(&self, axis: usize, min: f64, max: f64) -> bool {
         self.axes[axis] && min.is_finite() && max.is_finite()
     }
+
+    /// The sheared seam, where it matters to `b`: a box repeated along both the flow and
+    /// the gradient axis. A box unbounded along the flow axis is its own image under any
+    /// shift along it, and one unbounded along the gradient axis has no image across the
+    /// seam ([`region_boxes`] bounds a flow-bounded region along the gradient axis).
+    fn shear_for(&self, b: &Bounds) -> Option<ShearedSeam> {
+        self.shear.filter(|s| {
+            self.repeats(s.flow, b.min[s.flow], b.max[s.flow])
+                && self.repeats(s.gradient, b.min[s.gradient], b.max[s.gradient])
+        })
+    }
+
+    /// These seams without repetition along `axis`.
+    fn without(&self, axis: usize) -> Seams {
+        let mut plain = *self;
+        plain.axes[axis] = false;
+        plain.shear = None;
+        plain
+    }
 }
 
 impl Bounds {
     /// Whether `p` or one of its periodic images lies inside (half-open as
     /// [`Bounds::contains`]). Along a periodic axis the box must be narrower than the
-    /// period (see [`region_boxes`], which makes wider ones unbounded there).
+    /// period (see [`region_boxes`], which makes wider ones unbounded there). Under
+    /// Lees–Edwards shear the image k periods up the gradient axis is also shifted by k Δ
+    /// along the flow axis.
     pub fn contains_periodic(&self, p: DVec3, seams: &Seams) -> bool {
+        if let Some(shear) = seams.shear_for(self) {
+            // The gradient axis first: the one image of p whose gradient coordinate is at
+            // or above the box's lower face within a period fixes the brick, hence the
+            // flow shift; the other axes then take their plain images.
+            let (g, f) = (shear.gradient, shear.flow);
+            let (lo, l) = (self.min[g], seams.length[g]);
+            let mut periods = ((p[g] - lo) / l).floor();
+            let mut x = p[g] - l * periods;
+            if x < lo {
+                x += l;
+                periods -= 1.0;
+            }
+            if x >= self.max[g] {
+                return false;
+            }
+            let mut image = p;
+            image[g] = x;
+            image[f] -= periods * shear.offset;
+            return self.contains_plain_periodic(image, &seams.without(g));
+        }
+        self.contains_plain_periodic(p, seams)
+    }
+
+    /// [`Bounds::contains_periodic`] with each axis's images independent of the others.
+    fn contains_plain_periodic(&self, p: DVec3, seams: &Seams) -> bool {
         (0..3).all(|d| {
             let (lo, hi) = (self.min[d], self.max[d]);
             if seams.repeats(d, lo, hi) {
@@ -207,8 +276,37 @@ impl Bounds {
     /// images. Along a periodic axis the box must be narrower than the period, so that
     /// its images are disjoint and their fractions add, and the segment must reach at
     /// most one period from `a` along it (a branch between nearest images reaches half
-    /// a period at most). Without periodic axes this is [`Bounds::segment_fraction`].
+    /// a period at most). Under Lees–Edwards shear the image k periods up the gradient
+    /// axis is also shifted by k Δ along the flow axis. Without periodic axes this is
+    /// [`Bounds::segment_fraction`].
     pub fn periodic_segment_fraction(&self, a: DVec3, b: DVec3, seams: &Seams) -> f64 {
+        let Some(shear) = seams.shear_for(self) else {
+            return self.plain_periodic_segment_fraction(a, b, seams);
+        };
+        // The segment meets only the bricks of the three gradient images around the one
+        // whose lower face is the last at or below a (as along a plain periodic axis);
+        // within each, the image is a plain box repeated along the other axes.
+        let (g, f) = (shear.gradient, shear.flow);
+        let l = seams.length[g];
+        let base = ((a[g] - self.min[g]) / l).floor();
+        let plain = seams.without(g);
+        IMAGE_SHIFTS
+            .iter()
+            .map(|&k| {
+                let periods = base + k;
+                let mut image = *self;
+                image.min[g] += periods * l;
+                image.max[g] += periods * l;
+                image.min[f] += periods * shear.offset;
+                image.max[f] += periods * shear.offset;
+                image.plain_periodic_segment_fraction(a, b, &plain)
+            })
+            .sum()
+    }
+
+    /// [`Bounds::periodic_segment_fraction`] with each axis's images independent of the
+    /// others.
+    fn plain_periodic_segment_fraction(&self, a: DVec3, b: DVec3, seams: &Seams) -> f64 {
         // Per axis, the parameter intervals t ∈ [0, 1] in which the segment lies inside
         // the slab of the box (and of its images) along that axis; the fraction is the
         // measure of the intersection over the axes of these disjoint unions.
@@ -333,6 +431,8 @@ pub(crate) fn sample_domain(inputs: &DomainInputs, periodic: Option<&PeriodicBox
 /// is not diluted by empty space. Along a periodic axis the region is repeated every
 /// period (`seams`): it holds the grains and branch parts of its images, and its volume
 /// there is its own extent (at most one period), wherever it lies relative to the box.
+/// Under Lees–Edwards shear the images across the gradient seam slide along the flow
+/// axis with the offset Δ (see [`Seams`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct RegionBoxes {
     /// Membership of grain centres and clipping of branch segments.
@@ -414,6 +514,17 @@ pub(crate) fn region_boxes(
                 volume.max[d] = clip.max[d];
             }
         }
+        if let Some(shear) = seams.shear {
+            let (f, g) = (shear.flow, shear.gradient);
+            if seams.repeats(f, clip.min[f], clip.max[f]) && !clip.min[g].is_finite() {
+                // Bounded along the flow but spanning the gradient period: under shear
+                // its images across the seam slide along the flow, so it is the box's
+                // own gradient period [lo_g, hi_g), repeated as sliding bricks (an
+                // unbounded layer would meet each brick at a different flow range).
+                clip.min[g] = domain.min[g];
+                clip.max[g] = domain.max[g];
+            }
+        }
     }
     RegionBoxes {
         clip,
@@ -476,6 +587,7 @@ mod tests {
         let seams = Seams {
             axes: [true, false, false],
             length: DVec3::new(1.0, 0.0, 0.0),
+            shear: None,
         };
         let slab = |lo: f64, hi: f64| {
             let mut s = Bounds::EVERYWHERE;
@@ -511,11 +623,145 @@ mod tests {
         assert!((f - 0.5).abs() < 1e-15, "{f}");
     }
 
+    /// A box [0, 1) × [0, 2) periodic in x and y, sheared with flow x, gradient y, at an
+    /// offset Δ = 0.3: the image one period up is at (x + 0.3, y + 2).
+    fn sheared_seams() -> Seams {
+        Seams {
+            axes: [true, true, false],
+            length: DVec3::new(1.0, 2.0, 0.0),
+            shear: Some(ShearedSeam {
+                flow: 0,
+                gradient: 1,
+                offset: 0.3,
+            }),
+        }
+    }
+
+    fn flat_box(x: (f64, f64), y: (f64, f64)) -> Bounds {
+        Bounds {
+            min: DVec3::new(x.0, y.0, f64::NEG_INFINITY),
+            max: DVec3::new(x.1, y.1, f64::INFINITY),
+        }
+    }
+
+    #[test]
+    fn the_images_of_a_region_across_the_sheared_seam_slide_with_the_offset() {
+        let seams = sheared_seams();
+        // p's image one period up is (0.8, 2.1): a box there holds p, the box at the
+        // same x without the shift does not.
+        let p = DVec3::new(0.5, 0.1, 0.0);
+        let above = flat_box((0.7, 0.9), (1.9, 2.2));
+        assert!(above.contains_periodic(p, &seams));
+        assert!(!flat_box((0.4, 0.6), (1.9, 2.2)).contains_periodic(p, &seams));
+        // Plain periodic images would have it the other way round.
+        let plain = Seams {
+            shear: None,
+            ..seams
+        };
+        assert!(!above.contains_periodic(p, &plain));
+        // The same box given one brick down (−Δ along x, −2 along y), or one period
+        // along x further, holds the same points.
+        let below = flat_box((0.4, 0.6), (-0.1, 0.2));
+        let along = flat_box((1.7, 1.9), (1.9, 2.2));
+        for point in [
+            p,
+            DVec3::new(0.45, 1.95, 0.0),
+            DVec3::new(0.75, 1.95, 0.0),
+            DVec3::new(0.55, 0.15, 0.0),
+            DVec3::new(0.95, 0.05, 0.0),
+            DVec3::new(0.5, 1.0, 0.0),
+        ] {
+            let held = below.contains_periodic(point, &seams);
+            assert_eq!(above.contains_periodic(point, &seams), held, "{point}");
+            assert_eq!(along.contains_periodic(point, &seams), held, "{point}");
+        }
+        // (0.75, 1.95) is held through its image one period down, (0.45, −0.05); its
+        // neighbour at x = 0.45 is not, though a plain image would put it at (0.45, −0.05).
+        assert!(below.contains_periodic(DVec3::new(0.75, 1.95, 0.0), &seams));
+        assert!(!below.contains_periodic(DVec3::new(0.45, 1.95, 0.0), &seams));
+        assert!(below.contains_periodic(DVec3::new(0.45, 1.95, 0.0), &plain));
+    }
+
+    #[test]
+    fn boxes_tiling_a_sheared_cell_share_a_branch_through_the_seam() {
+        let seams = sheared_seams();
+        // A branch from (0.6, 1.9) through the top face to (0.7, 2.1): its upper half lies
+        // in the brick one up, whose points are those of the box at (x − 0.3, y − 2), so
+        // the whole branch lies in the box frame at x ∈ [0.3, 0.4), y ∈ [−0.1, 0.1).
+        let (a, b) = (DVec3::new(0.6, 1.9, 0.0), DVec3::new(0.7, 2.1, 0.0));
+        let xs = [0.1, 0.35, 0.6, 0.85, 1.1];
+        let ys = [-0.3, 0.7, 1.2, 1.7];
+        let mut total = 0.0;
+        for x in xs.windows(2) {
+            for y in ys.windows(2) {
+                let part =
+                    flat_box((x[0], x[1]), (y[0], y[1])).periodic_segment_fraction(a, b, &seams);
+                let expected = match (x[0], y[0]) {
+                    (0.1, -0.3) | (0.35, -0.3) => 0.5,
+                    _ => 0.0,
+                };
+                assert!(
+                    (part - expected).abs() < 1e-15,
+                    "[{}, {}) × [{}, {}): {part}",
+                    x[0],
+                    x[1],
+                    y[0],
+                    y[1]
+                );
+                total += part;
+            }
+        }
+        assert!((total - 1.0).abs() < 1e-15, "{total}");
+        // With plain images the branch would fall whole in [0.6, 0.85) × [1.7, 2.7).
+        let plain = Seams {
+            shear: None,
+            ..seams
+        };
+        let f = flat_box((0.6, 0.85), (1.7, 2.7)).periodic_segment_fraction(a, b, &plain);
+        assert!((f - 1.0).abs() < 1e-15);
+        assert_eq!(
+            flat_box((0.6, 0.85), (-0.3, 0.7)).periodic_segment_fraction(a, b, &seams),
+            0.0
+        );
+    }
+
+    #[test]
+    fn a_flow_slab_of_a_sheared_box_is_its_gradient_period_as_sliding_bricks() {
+        let seams = sheared_seams();
+        let domain = Bounds {
+            min: DVec3::new(0.0, 0.0, -0.5),
+            max: DVec3::new(1.0, 2.0, 0.5),
+        };
+        let slab = RegionShape::Slab {
+            axis: 0,
+            min: 0.35,
+            max: 0.6,
+        };
+        let boxes = region_boxes(&slab, &domain, 2, &seams);
+        assert_eq!((boxes.clip.min.y, boxes.clip.max.y), (0.0, 2.0));
+        assert!((boxes.volume.volume(2) - 0.25 * 2.0).abs() < 1e-15);
+        // The upper half of the branch above, mapped into the box, is in the slab.
+        let (a, b) = (DVec3::new(0.6, 1.9, 0.0), DVec3::new(0.7, 2.1, 0.0));
+        assert!((boxes.fraction(a, b) - 0.5).abs() < 1e-15);
+        assert!(boxes.holds(DVec3::new(0.4, 1.99, 0.0)));
+        assert!(!boxes.holds(DVec3::new(0.7, 0.01, 0.0)));
+        // A slab along the gradient is unaffected by the shift.
+        let layer = RegionShape::Slab {
+            axis: 1,
+            min: 1.8,
+            max: 2.2,
+        };
+        let boxes = region_boxes(&layer, &domain, 2, &seams);
+        assert!((boxes.fraction(a, b) - 1.0).abs() < 1e-15);
+        assert!(boxes.holds(DVec3::new(0.9, 0.1, 0.0)));
+    }
+
     #[test]
     fn a_region_of_a_whole_period_is_unbounded_along_it() {
         let seams = Seams {
             axes: [false, false, true],
             length: DVec3::new(0.0, 0.0, 2.0),
+            shear: None,
         };
         let domain = Bounds {
             min: DVec3::ZERO,
