@@ -204,6 +204,10 @@ pub struct JiangLiuState {
     pub velocity: DVec3,
     /// Whether the state has been started (false for a contact made this step).
     pub active: bool,
+    /// Unit normal of the last evaluation (zero before the first): the step's relative
+    /// displacement is split along the mean of the old and new normals.
+    #[serde(default)]
+    pub normal: DVec3,
 }
 
 /// Coefficients of one contact, with the grain scales folded in.
@@ -472,10 +476,22 @@ impl ContactLaw for JiangLiu {
         let (w_e_old, w_r_old) = (state.elastic_energy, state.relaxation_energy);
         let mut heat = 0.0;
         if dt > 0.0 {
+            // Split the step's displacement along the mean of the old and new normals:
+            // the trapezoidal work of the force is, to O(dt³), the normal force times
+            // Δ·n_mid; splitting along the new normal alone shifts u_n (and u_t) by
+            // O(dt²) per step away from that work, a first-order drift of the energy sum
+            // in any impact with sliding (measured 1.4e-8 of K₀ still at 51200 steps per
+            // contact, oblique). u_t is carried into the middle plane for the step and into
+            // the new plane after it, keeping its length each time.
+            let split = if state.active && state.normal != DVec3::ZERO {
+                (state.normal + n).normalize_or(n)
+            } else {
+                n
+            };
             let v = displacement / dt;
-            let v_n = v.dot(n);
-            let v_t = v - n * v_n;
-            state.tangential_displacement = rotate_into_plane(state.tangential_displacement, n);
+            let v_n = v.dot(split);
+            let v_t = v - split * v_n;
+            state.tangential_displacement = rotate_into_plane(state.tangential_displacement, split);
             let (duration, overlap_start) = if state.active {
                 (dt, state.overlap)
             } else {
@@ -493,6 +509,7 @@ impl ContactLaw for JiangLiu {
             state.active = true;
             heat =
                 integrate_with(p, &c, state, duration, overlap_start, kin.overlap, v_n, v_t).heat;
+            state.tangential_displacement = rotate_into_plane(state.tangential_displacement, n);
         } else if !state.active {
             // Priming pass of grains that start overlapping: u_n = −δ (paper, section 3).
             state.normal_displacement = -kin.overlap;
@@ -532,6 +549,7 @@ impl ContactLaw for JiangLiu {
         state.heat_rate = if dt > 0.0 { heat / dt } else { 0.0 };
         state.force = force;
         state.overlap = kin.overlap;
+        state.normal = n;
         out
     }
 }
