@@ -38,6 +38,18 @@ pub const HEAT_CHANNEL: usize = 0;
 /// Index of the relaxation-storage channel (signed change of w_r).
 pub const RELAXATION_CHANNEL: usize = 1;
 
+/// Per-contact quantities the law exposes to the recording, in this order: w_e (J), w_r
+/// (J), the mean heat rate R of the last step (W), the heat the contact has released since
+/// it started (J), u_n (m, negative in compression) and |u_t| (m).
+pub const CONTACT_QUANTITIES: [&str; 6] = [
+    "elastic_energy",
+    "relaxation_energy",
+    "heat_rate",
+    "heat",
+    "normal_displacement",
+    "tangential_displacement",
+];
+
 /// Largest number of sub-steps one evaluation takes (bounds the cost of a stiff contact).
 pub const MAX_SUBSTEPS: u32 = 4096;
 /// Sub-step length as a fraction of the fastest relaxation time of the contact: explicit
@@ -442,6 +454,21 @@ impl ContactLaw for JiangLiu {
 
     fn dissipation() -> Vec<&'static str> {
         vec!["heat", "relaxation_storage"]
+    }
+
+    fn contact_quantity_names() -> &'static [&'static str] {
+        &CONTACT_QUANTITIES
+    }
+
+    fn contact_quantities(state: &JiangLiuState, out: &mut [f64]) {
+        out.copy_from_slice(&[
+            state.elastic_energy,
+            state.relaxation_energy,
+            state.heat_rate,
+            state.heat,
+            state.normal_displacement,
+            state.tangential_displacement.length(),
+        ]);
     }
 
     fn evaluate(
