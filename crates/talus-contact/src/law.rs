@@ -64,6 +64,63 @@ pub trait ContactLaw: Send + Sync + 'static {
         history: &mut Self::History,
         dt: f64,
     ) -> ContactResponse;
+
+    /// Names of the per-contact quantities the law exposes from its history (for example
+    /// an elastic energy or a heat rate), in the order [`Self::contact_quantities`] writes
+    /// them. None by default; a law that exposes none costs nothing: exporters read
+    /// contact quantities only of laws that name some, and only when they record.
+    fn contact_quantity_names() -> &'static [&'static str] {
+        &[]
+    }
+
+    /// Writes one contact's quantities, one per entry of [`Self::contact_quantity_names`],
+    /// into `out` (which has exactly that length), from its history after the last
+    /// evaluation.
+    fn contact_quantities(history: &Self::History, out: &mut [f64]) {
+        let _ = (history, out);
+    }
+}
+
+/// One installed law's per-contact quantities, type-erased for exporters
+/// ([`ContactLaw::contact_quantity_names`]).
+#[derive(Clone, Debug)]
+pub struct ContactQuantitySource {
+    /// Name of the law.
+    pub law: &'static str,
+    /// Names of the quantities, in the order of each contact's values.
+    pub names: &'static [&'static str],
+    /// Appends, for each active contact of the law ([`ContactForce::is_active`]), its
+    /// entity to the first vector and its `names.len()` values to the second.
+    pub collect: fn(&mut World, &mut Vec<Entity>, &mut Vec<f64>),
+}
+
+/// The laws of a scene that expose per-contact quantities; present only when at least one
+/// installed law names some.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct ContactQuantitySources(pub Vec<ContactQuantitySource>);
+
+/// [`ContactQuantitySource::collect`] of law `L`.
+fn collect_quantities<L: ContactLaw>(
+    world: &mut World,
+    entities: &mut Vec<Entity>,
+    values: &mut Vec<f64>,
+) {
+    let n = L::contact_quantity_names().len();
+    let mut query = world.query::<(
+        Entity,
+        &ContactGeometry,
+        &ContactForce,
+        &LawState<L::History>,
+    )>();
+    for (entity, geometry, force, history) in query.iter(world) {
+        if !force.is_active(geometry) {
+            continue;
+        }
+        entities.push(entity);
+        let start = values.len();
+        values.resize(start + n, 0.0);
+        L::contact_quantities(&history.0, &mut values[start..]);
+    }
 }
 
 /// One material pair assigned to a law by a scene.
@@ -257,6 +314,18 @@ pub fn install_law<L: ContactLaw>(
         format!("law:{name}"),
         evaluate_law::<L>,
     );
+    if !pairs.is_empty() && !L::contact_quantity_names().is_empty() {
+        let mut sources = sim
+            .world
+            .get_resource_or_insert_with(ContactQuantitySources::default);
+        if !sources.0.iter().any(|s| s.law == name) {
+            sources.0.push(ContactQuantitySource {
+                law: name,
+                names: L::contact_quantity_names(),
+                collect: collect_quantities::<L>,
+            });
+        }
+    }
 }
 
 /// The laws a program knows, by name and by the rolling and twisting parts a scene may add.

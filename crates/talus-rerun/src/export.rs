@@ -5,7 +5,7 @@
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rerun::{EntityPath, EntityPathPart};
-use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind};
+use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind, ContactQuantitySources};
 use talus_core::prelude::*;
 use talus_stress::{FieldRecord, FieldSample, RegionStress, StressRecord, StressSample};
 
@@ -59,6 +59,14 @@ pub(crate) struct ExportState {
     stress_logged: u64,
     /// [`FieldRecord::taken`] of the last field sample logged.
     fields_logged: u64,
+    /// `contacts/<law>/<quantity>` paths, per law of [`ContactQuantitySources`].
+    quantity_paths: Vec<Vec<EntityPath>>,
+    /// Contacts of one law in the frame being logged.
+    quantity_contacts: Vec<Entity>,
+    /// Their quantities, `names.len()` per contact.
+    quantity_values: Vec<f64>,
+    /// One quantity of every contact, in contact order.
+    quantity_column: Vec<f64>,
 }
 
 /// Scalars logged per stress region, under `stress/<region>/`.
@@ -169,6 +177,132 @@ pub fn rerun_export(
     {
         recorder.error = Some(format!("rerun export at step {}: {e}", clock.step));
     }
+}
+
+/// Radius of a contact-quantity strip, as a fraction of the radius of the contact's grain.
+const QUANTITY_STRIP_RADIUS: f64 = 0.15;
+
+/// Name of the per-contact value column of a contact-quantity entity.
+pub const QUANTITY_VALUE_FIELD: &str = "value";
+
+/// The per-contact quantity export, in [`Stage::Export`] after [`rerun_export`], scheduled
+/// only when a law of the scene exposes contact quantities ([`ContactQuantitySources`]):
+/// on every recorded frame, for each such law and each of its quantities, logs to
+/// `contacts/<law>/<quantity>` one `LineStrips3D` batch with one strip per active contact
+/// of the law (drawn as the force chains are), coloured by the value (grey at 0, red
+/// positive, blue negative, scaled by the frame's largest |value|), and the values
+/// themselves as the component [`QUANTITY_VALUE_FIELD`] (one f64 per strip, same order).
+pub fn rerun_export_contact_quantities(world: &mut World) {
+    let step = world.resource::<Clock>().step;
+    let time = world.resource::<Clock>().time;
+    let Some(sources) = world.get_resource::<ContactQuantitySources>().cloned() else {
+        return;
+    };
+    let Some(mut recorder) = world.remove_resource::<RerunRecorder>() else {
+        return;
+    };
+    if step.is_multiple_of(recorder.every) {
+        let result = log_contact_quantities(world, &mut recorder, &sources, step, time);
+        if let Err(e) = result
+            && recorder.error.is_none()
+        {
+            recorder.error = Some(format!("rerun contact-quantity export at step {step}: {e}"));
+        }
+    }
+    world.insert_resource(recorder);
+}
+
+fn log_contact_quantities(
+    world: &mut World,
+    recorder: &mut RerunRecorder,
+    sources: &ContactQuantitySources,
+    step: u64,
+    time: f64,
+) -> rerun::RecordingStreamResult<()> {
+    let s = &mut recorder.state;
+    if s.quantity_paths.len() != sources.0.len() {
+        s.quantity_paths = sources
+            .0
+            .iter()
+            .map(|source| {
+                source
+                    .names
+                    .iter()
+                    .map(|q| {
+                        EntityPath::new(vec![
+                            "contacts".into(),
+                            EntityPathPart::new(source.law),
+                            EntityPathPart::new(*q),
+                        ])
+                    })
+                    .collect()
+            })
+            .collect();
+    }
+    let rec = &recorder.stream;
+    rec.set_time_sequence(STEP_TIMELINE, step as i64);
+    rec.set_duration_secs(TIME_TIMELINE, time);
+    let periodic = world.get_resource::<PeriodicBox>().cloned();
+    for (source, paths) in sources.0.iter().zip(&s.quantity_paths) {
+        s.quantity_contacts.clear();
+        s.quantity_values.clear();
+        (source.collect)(world, &mut s.quantity_contacts, &mut s.quantity_values);
+        s.strips.clear();
+        s.strip_radii.clear();
+        for &entity in &s.quantity_contacts {
+            let (Some(c), Some(g)) = (
+                world.get::<Contact>(entity),
+                world.get::<ContactGeometry>(entity),
+            ) else {
+                continue;
+            };
+            let centre = |e: Entity| world.get::<Position>(e).map_or(g.point, |p| p.0);
+            let start = centre(c.a);
+            let end = match c.kind {
+                ContactKind::GrainGrain => match &periodic {
+                    Some(b) => start - b.min_image(start - centre(c.b)),
+                    None => centre(c.b),
+                },
+                ContactKind::GrainWall => g.point,
+            };
+            s.strips.push([to_f32(start), to_f32(end)]);
+            let radius = world.get::<Radius>(c.a).map_or(0.0, |r| r.0);
+            s.strip_radii.push((QUANTITY_STRIP_RADIUS * radius) as f32);
+        }
+        let n = source.names.len();
+        for (k, path) in paths.iter().enumerate() {
+            s.quantity_column.clear();
+            s.quantity_column
+                .extend(s.quantity_values.iter().skip(k).step_by(n.max(1)).copied());
+            let largest = s
+                .quantity_column
+                .iter()
+                .map(|v| v.abs())
+                .fold(0.0, f64::max);
+            s.colors.clear();
+            s.colors.extend(s.quantity_column.iter().map(|&v| {
+                ramp(if largest > 0.0 {
+                    0.5 + 0.5 * (v / largest).clamp(-1.0, 1.0)
+                } else {
+                    0.5
+                })
+            }));
+            rec.log(
+                path.clone(),
+                &rerun::LineStrips3D::new(s.strips.iter().copied())
+                    .with_radii(s.strip_radii.iter().copied())
+                    .with_colors(s.colors.iter().copied()),
+            )?;
+            rec.log(
+                path.clone(),
+                &rerun::AnyValues::default().with_component::<rerun::components::Scalar>(
+                    QUANTITY_VALUE_FIELD,
+                    s.quantity_column.iter().copied(),
+                ),
+            )?;
+        }
+    }
+    Ok(())
 }
 
 /// Axis-aligned bounding box of the grains, and radius statistics.

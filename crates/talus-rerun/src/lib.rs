@@ -43,6 +43,11 @@
 //! * `stats/...`: scalars `translational_kinetic`, `rotational_kinetic`, `elastic`,
 //!   `dissipated/<channel>` (one per dissipation channel), `gravity_work`, `wall_work`,
 //!   `contacts`, `max_overlap_ratio`.
+//! * `contacts/<law>/<quantity>`: only for a law that exposes per-contact quantities
+//!   ([`talus_contact::ContactLaw::contact_quantity_names`]): one strip per active
+//!   contact of the law, coloured by the value, and the values as the component
+//!   [`QUANTITY_VALUE_FIELD`] (one f64 per strip); [`read_contact_quantity`] reads them
+//!   back. Logged by a second system, scheduled only when such a law is installed.
 //! * `/`: view coordinates, once, statically: right-handed, +Y up in 2-D or when gravity
 //!   lies mostly along y, +Z up otherwise.
 //!
@@ -57,8 +62,8 @@ use std::path::{Path, PathBuf};
 use bevy_ecs::prelude::*;
 use talus_core::schedule::{Plugin, SimBuilder, Stage};
 
-pub use export::rerun_export;
-pub use readback::{EntitySummary, FrameCounts, read_counts, read_entities};
+pub use export::{QUANTITY_VALUE_FIELD, rerun_export, rerun_export_contact_quantities};
+pub use readback::{EntitySummary, FrameCounts, read_contact_quantity, read_counts, read_entities};
 
 /// Application id of the recordings this crate writes.
 pub const APPLICATION_ID: &str = "talus";
@@ -76,6 +81,9 @@ pub const STEP_TIMELINE: &str = "step";
 pub const TIME_TIMELINE: &str = "sim_time";
 /// Name of the export system in the plan.
 pub const SYSTEM_NAME: &str = "rerun_export";
+/// Name of the per-contact quantity export system in the plan (scheduled only when a law
+/// of the scene exposes contact quantities).
+pub const CONTACT_QUANTITIES_SYSTEM_NAME: &str = "rerun_export_contact_quantities";
 
 /// The exporter plugin: records the simulation into a rerun `.rrd` file every
 /// `every` steps from the [`Stage::Export`] stage.
@@ -160,6 +168,18 @@ impl Plugin for RerunExportPlugin {
             self.path.display()
         ));
         sim.add_system(Stage::Export, SYSTEM_NAME, rerun_export);
+        // Per-contact quantities only when a law of the scene exposes some.
+        if sim
+            .world
+            .get_resource::<talus_contact::ContactQuantitySources>()
+            .is_some_and(|s| !s.0.is_empty())
+        {
+            sim.add_system(
+                Stage::Export,
+                CONTACT_QUANTITIES_SYSTEM_NAME,
+                rerun_export_contact_quantities,
+            );
+        }
     }
 }
 

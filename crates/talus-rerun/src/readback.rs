@@ -5,7 +5,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use rerun::external::arrow::array::Array as _;
+use rerun::external::arrow::array::{Array as _, AsArray as _};
+use rerun::external::arrow::datatypes::Float64Type;
 use rerun::{ChunkStore, ChunkStoreConfig, StoreKind, TimelineName};
 
 use crate::{FORCE_CHAINS_PATH, GRAINS_PATH, STEP_TIMELINE, TIME_TIMELINE};
@@ -78,6 +79,54 @@ pub fn read_counts(path: impl AsRef<Path>) -> Result<Vec<FrameCounts>, String> {
         }
     }
     Ok(frames.into_values().collect())
+}
+
+/// Reads the per-contact values of one contact quantity of one law back from the
+/// recording at `path` (entity `contacts/<law>/<quantity>`, component
+/// [`crate::QUANTITY_VALUE_FIELD`]): for each recorded step in increasing order, one value
+/// per active contact of the law, in the order of that frame's strips.
+pub fn read_contact_quantity(
+    path: impl AsRef<Path>,
+    law: &str,
+    quantity: &str,
+) -> Result<Vec<(u64, Vec<f64>)>, String> {
+    let path = path.as_ref();
+    let stores = open_stores(path)?;
+    let entity = rerun::EntityPath::new(vec![
+        rerun::EntityPathPart::from("contacts"),
+        rerun::EntityPathPart::new(law),
+        rerun::EntityPathPart::new(quantity),
+    ]);
+    let field = rerun::ComponentIdentifier::from(crate::QUANTITY_VALUE_FIELD);
+    let step_timeline = TimelineName::from_static_str(STEP_TIMELINE);
+    let mut rows: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    for store in &stores {
+        for chunk in store.iter_physical_chunks() {
+            if chunk.entity_path() != &entity {
+                continue;
+            }
+            let (Some(steps), Some(column)) = (
+                chunk.timelines().get(&step_timeline),
+                chunk.components().get(field),
+            ) else {
+                continue;
+            };
+            let lists = &column.list_array;
+            for (row, &step) in steps.times_raw().iter().enumerate() {
+                if lists.is_null(row) {
+                    continue;
+                }
+                let step = u64::try_from(step)
+                    .map_err(|_| format!("negative step {step} in {}", path.display()))?;
+                let values = lists.value(row);
+                let values = values
+                    .as_primitive_opt::<Float64Type>()
+                    .ok_or_else(|| format!("{entity}: values are not f64 in {}", path.display()))?;
+                rows.insert(step, values.values().to_vec());
+            }
+        }
+    }
+    Ok(rows.into_iter().collect())
 }
 
 /// Rows logged to one entity, as read back from the file.

@@ -38,6 +38,18 @@ pub const HEAT_CHANNEL: usize = 0;
 /// Index of the relaxation-storage channel (signed change of w_r).
 pub const RELAXATION_CHANNEL: usize = 1;
 
+/// Per-contact quantities the law exposes to the recording, in this order: w_e (J), w_r
+/// (J), the mean heat rate R of the last step (W), the heat the contact has released since
+/// it started (J), u_n (m, negative in compression) and |u_t| (m).
+pub const CONTACT_QUANTITIES: [&str; 6] = [
+    "elastic_energy",
+    "relaxation_energy",
+    "heat_rate",
+    "heat",
+    "normal_displacement",
+    "tangential_displacement",
+];
+
 /// Largest number of sub-steps one evaluation takes (bounds the cost of a stiff contact).
 pub const MAX_SUBSTEPS: u32 = 4096;
 /// Sub-step length as a fraction of the fastest relaxation time of the contact: explicit
@@ -204,6 +216,10 @@ pub struct JiangLiuState {
     pub velocity: DVec3,
     /// Whether the state has been started (false for a contact made this step).
     pub active: bool,
+    /// Unit normal of the last evaluation (zero before the first): the step's relative
+    /// displacement is split along the mean of the old and new normals.
+    #[serde(default)]
+    pub normal: DVec3,
 }
 
 /// Coefficients of one contact, with the grain scales folded in.
@@ -440,6 +456,21 @@ impl ContactLaw for JiangLiu {
         vec!["heat", "relaxation_storage"]
     }
 
+    fn contact_quantity_names() -> &'static [&'static str] {
+        &CONTACT_QUANTITIES
+    }
+
+    fn contact_quantities(state: &JiangLiuState, out: &mut [f64]) {
+        out.copy_from_slice(&[
+            state.elastic_energy,
+            state.relaxation_energy,
+            state.heat_rate,
+            state.heat,
+            state.normal_displacement,
+            state.tangential_displacement.length(),
+        ]);
+    }
+
     fn evaluate(
         p: &JiangLiuParams,
         kin: &ContactKinematics,
@@ -472,10 +503,22 @@ impl ContactLaw for JiangLiu {
         let (w_e_old, w_r_old) = (state.elastic_energy, state.relaxation_energy);
         let mut heat = 0.0;
         if dt > 0.0 {
+            // Split the step's displacement along the mean of the old and new normals:
+            // the trapezoidal work of the force is, to O(dt³), the normal force times
+            // Δ·n_mid; splitting along the new normal alone shifts u_n (and u_t) by
+            // O(dt²) per step away from that work, a first-order drift of the energy sum
+            // in any impact with sliding (measured 1.4e-8 of K₀ still at 51200 steps per
+            // contact, oblique). u_t is carried into the middle plane for the step and into
+            // the new plane after it, keeping its length each time.
+            let split = if state.active && state.normal != DVec3::ZERO {
+                (state.normal + n).normalize_or(n)
+            } else {
+                n
+            };
             let v = displacement / dt;
-            let v_n = v.dot(n);
-            let v_t = v - n * v_n;
-            state.tangential_displacement = rotate_into_plane(state.tangential_displacement, n);
+            let v_n = v.dot(split);
+            let v_t = v - split * v_n;
+            state.tangential_displacement = rotate_into_plane(state.tangential_displacement, split);
             let (duration, overlap_start) = if state.active {
                 (dt, state.overlap)
             } else {
@@ -493,6 +536,7 @@ impl ContactLaw for JiangLiu {
             state.active = true;
             heat =
                 integrate_with(p, &c, state, duration, overlap_start, kin.overlap, v_n, v_t).heat;
+            state.tangential_displacement = rotate_into_plane(state.tangential_displacement, n);
         } else if !state.active {
             // Priming pass of grains that start overlapping: u_n = −δ (paper, section 3).
             state.normal_displacement = -kin.overlap;
@@ -532,6 +576,7 @@ impl ContactLaw for JiangLiu {
         state.heat_rate = if dt > 0.0 { heat / dt } else { 0.0 };
         state.force = force;
         state.overlap = kin.overlap;
+        state.normal = n;
         out
     }
 }
