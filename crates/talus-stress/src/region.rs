@@ -231,6 +231,14 @@ impl Bounds {
     /// Lees–Edwards shear the image k periods up the gradient axis is also shifted by k Δ
     /// along the flow axis.
     pub fn contains_periodic(&self, p: DVec3, seams: &Seams) -> bool {
+        self.image_inside(p, seams).is_some()
+    }
+
+    /// The image of `p` that lies inside the box (see [`Bounds::contains_periodic`]), and
+    /// how many periods k it was moved down the Lees–Edwards gradient axis (its flow
+    /// coordinate moved by −k Δ; 0 without shear), or `None` when no image is inside.
+    /// A grain held through such an image moves with its velocity less k γ̇ L_g e_f.
+    pub fn image_inside(&self, p: DVec3, seams: &Seams) -> Option<(DVec3, f64)> {
         if let Some(shear) = seams.shear_for(self) {
             // The gradient axis first: the one image of p whose gradient coordinate is at
             // or above the box's lower face within a period fixes the brick, hence the
@@ -244,19 +252,22 @@ impl Bounds {
                 periods -= 1.0;
             }
             if x >= self.max[g] {
-                return false;
+                return None;
             }
             let mut image = p;
             image[g] = x;
             image[f] -= periods * shear.offset;
-            return self.contains_plain_periodic(image, &seams.without(g));
+            return self
+                .plain_image_inside(image, &seams.without(g))
+                .map(|q| (q, periods));
         }
-        self.contains_plain_periodic(p, seams)
+        self.plain_image_inside(p, seams).map(|q| (q, 0.0))
     }
 
-    /// [`Bounds::contains_periodic`] with each axis's images independent of the others.
-    fn contains_plain_periodic(&self, p: DVec3, seams: &Seams) -> bool {
-        (0..3).all(|d| {
+    /// [`Bounds::image_inside`] with each axis's images independent of the others.
+    fn plain_image_inside(&self, p: DVec3, seams: &Seams) -> Option<DVec3> {
+        let mut image = p;
+        for d in 0..3 {
             let (lo, hi) = (self.min[d], self.max[d]);
             if seams.repeats(d, lo, hi) {
                 let l = seams.length[d];
@@ -265,11 +276,15 @@ impl Bounds {
                 if x < lo {
                     x += l;
                 }
-                x < hi
-            } else {
-                lo <= p[d] && p[d] < hi
+                if x >= hi {
+                    return None;
+                }
+                image[d] = x;
+            } else if !(lo <= p[d] && p[d] < hi) {
+                return None;
             }
-        })
+        }
+        Some(image)
     }
 
     /// Fraction of the segment from `a` to `b` inside the box or one of its periodic
@@ -446,10 +461,16 @@ pub(crate) struct RegionBoxes {
 }
 
 impl RegionBoxes {
-    /// Whether a grain centre belongs to the region (or to one of its images).
+    /// The image of a grain centre that belongs to the region, with the number of
+    /// periods it was moved down a Lees–Edwards gradient axis ([`Bounds::image_inside`]);
+    /// the centre itself for the domain; `None` when the grain is not in the region.
     #[inline]
-    pub fn holds(&self, p: DVec3) -> bool {
-        self.whole || self.clip.contains_periodic(p, &self.seams)
+    pub fn held_image(&self, p: DVec3) -> Option<(DVec3, f64)> {
+        if self.whole {
+            Some((p, 0.0))
+        } else {
+            self.clip.image_inside(p, &self.seams)
+        }
     }
 
     /// The fraction of the branch segment from `a` to `b` that counts in the region: 1 for

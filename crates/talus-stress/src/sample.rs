@@ -276,18 +276,37 @@ pub fn sample_stress(
         ..Sums::default()
     }));
 
+    // A grain belongs to a region through the image of it that lies inside (across a
+    // periodic seam, or a sheared one): its centroid, mean velocity and fluctuations are
+    // taken at that image, which moves k γ̇ L_g slower along the flow axis when it is k
+    // periods down a Lees–Edwards gradient axis.
+    let shear = snapshot.periodic.and_then(|b| b.shear);
+    let image_speed = snapshot
+        .periodic
+        .zip(shear)
+        .map_or(0.0, |(b, s)| s.rate * b.length()[s.gradient]);
+    let held = |b: &crate::region::RegionBoxes, p: DVec3, v: DVec3| {
+        b.held_image(p).map(|(image, periods)| {
+            let mut u = v;
+            if let Some(shear) = &shear {
+                u[shear.flow] -= periods * image_speed;
+            }
+            (image, u)
+        })
+    };
+
     // Grains, first pass: totals and means.
     for (p, v, r, m, mat) in &grains {
         let rho = density_of(mat);
         for s in sums.iter_mut() {
             let b = s.boxes.expect("set above");
-            if !b.holds(p.0) {
+            let Some((p, v)) = held(&b, p.0, v.0) else {
                 continue;
-            }
+            };
             s.grains += 1;
             s.mass += m.0;
-            s.momentum += m.0 * v.0;
-            s.first_moment += m.0 * p.0;
+            s.momentum += m.0 * v;
+            s.first_moment += m.0 * p;
             s.diameter += 2.0 * r.0;
             s.density += rho;
             if rho > 0.0 {
@@ -304,17 +323,16 @@ pub fn sample_stress(
     // Under Lees–Edwards shear the kinetic stress takes the peculiar velocity: less the
     // streaming profile γ̇ (x_g − c_g) e_f, i.e. (the profile being linear) less the
     // region's mean and γ̇ (x_g − x̄_g) e_f.
-    let shear = snapshot.periodic.and_then(|b| b.shear);
     // Second pass: fluctuations about the mean (two passes, not Σ m v v − M v̄ v̄, so
     // that a fast-moving region keeps its small fluctuations to full precision).
     for (p, v, _, m, _) in &grains {
         for s in sums.iter_mut() {
             let b = s.boxes.expect("set above");
-            if !b.holds(p.0) {
+            let Some((p, v)) = held(&b, p.0, v.0) else {
                 continue;
-            }
-            let dv = v.0 - s.mean_velocity;
-            let dx = p.0 - s.centroid;
+            };
+            let dv = v - s.mean_velocity;
+            let dx = p - s.centroid;
             let mut peculiar = dv;
             if let Some(shear) = &shear {
                 peculiar[shear.flow] -= shear.rate * dx[shear.gradient];
