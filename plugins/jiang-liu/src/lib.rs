@@ -10,7 +10,10 @@
 //! * w_r is integrated as s = w_r^{3/4}, whose rate is regular at s = 0, so that a
 //!   collision starting at w_r = 0 takes the physical (maximal) branch;
 //! * the Heaviside steps Θ(δ/d) are sharp by default and smoothed as
-//!   ½[tanh((x − x0)/x1) + 1] when `heaviside_width` x1 > 0.
+//!   ½[tanh((x − x0)/x1) + 1] when `heaviside_width` x1 > 0;
+//! * the cohesive force −c, which switches with the contact, is weighted at the touch
+//!   step and followed by one last pull at separation so that its discrete work can only
+//!   lose energy, never create it.
 //!
 //! Energy: w_e is the contact's elastic energy; channel `heat` books ∫R dt; channel
 //! `relaxation_storage` books the signed change of w_r, so that the running sum of that
@@ -584,7 +587,7 @@ impl ContactLaw for JiangLiu {
         };
         let v_n = velocity.dot(n);
         let mut force = contact_force(p, &c, state, n, kin.overlap, v_n, velocity - n * v_n);
-        if cohesion_weight < 1.0 {
+        if cohesion_weight < 1.0 && p.cohesion > 0.0 {
             // contact_force carries the cohesion as n (1 − α_n) Θ (−c); keep its share.
             force += n
                 * ((1.0 - p.alpha_n)
