@@ -10,7 +10,10 @@
 //! * w_r is integrated as s = w_r^{3/4}, whose rate is regular at s = 0, so that a
 //!   collision starting at w_r = 0 takes the physical (maximal) branch;
 //! * the Heaviside steps Θ(δ/d) are sharp by default and smoothed as
-//!   ½[tanh((x − x0)/x1) + 1] when `heaviside_width` x1 > 0.
+//!   ½[tanh((x − x0)/x1) + 1] when `heaviside_width` x1 > 0;
+//! * the cohesive force −c, which switches with the contact, is weighted at the touch
+//!   step and followed by one last pull at separation so that its discrete work can only
+//!   lose energy, never create it.
 //!
 //! Energy: w_e is the contact's elastic energy; channel `heat` books ∫R dt; channel
 //! `relaxation_storage` books the signed change of w_r, so that the running sum of that
@@ -494,14 +497,35 @@ impl ContactLaw for JiangLiu {
             let released = w_e.max(0.0) + w_r;
             out.dissipated[HEAT_CHANNEL] = released;
             out.dissipated[RELAXATION_CHANNEL] = -w_r;
-            // Work + Δw_e + Δw_r + heat, each from its own formula.
-            out.integration_error = old_work - w_e - w_r + released;
+            let was_touching = state.active;
             *state = JiangLiuState::default();
+            // Cohesion at separation (§5): the force −c acted over only the part of the
+            // step still in contact, but the trapezoidal rule charges the last in-contact
+            // force over half of it, so the mechanical energy K + w_e + w_r can rise by up
+            // to ½ c Δ_n here. What it would rise by, `gain`, is taken back by a last
+            // attractive force of at most c, which does −½ g Δ_n now and, while the
+            // grains keep parting, negative work over the next step (booked then); never
+            // so large that it reverses the parting.
+            let gain = old_work - w_e - w_r;
+            let parting = displacement.dot(n);
+            if was_touching && p.cohesion > 0.0 && gain > 0.0 && parting > 0.0 && dt > 0.0 {
+                let parting_speed = kin.relative_velocity.dot(n).max(0.0);
+                let pull = (2.0 * gain / parting)
+                    .min(p.cohesion)
+                    .min(kin.effective_mass * parting_speed / dt);
+                out.force = -pull * n;
+                state.force = out.force;
+            }
+            // Work + Δw_e + Δw_r + heat, each from its own formula.
+            out.integration_error =
+                old_work + 0.5 * out.force.dot(displacement) - w_e - w_r + released;
             return out;
         }
         let c = coefficients(p, kin.effective_mass, kin.effective_radius);
         let (w_e_old, w_r_old) = (state.elastic_energy, state.relaxation_energy);
         let mut heat = 0.0;
+        // Share of the cohesive force −c the touch step returns (1 after it).
+        let mut cohesion_weight = 1.0;
         if dt > 0.0 {
             // Split the step's displacement along the mean of the old and new normals:
             // the trapezoidal work of the force is, to O(dt³), the normal force times
@@ -531,6 +555,13 @@ impl ContactLaw for JiangLiu {
                     1.0
                 };
                 state.normal_displacement = -(kin.overlap - fraction * approach).max(0.0);
+                // Cohesion at touch (§5): −c acts over the part `fraction` of the step,
+                // doing the work c·fraction·approach that the cohesive term c u_n of w_e
+                // loses; the trapezoidal rule would charge ½ c·approach for the full −c,
+                // a gain when fraction < ½. Returning 2·fraction of it (at most all)
+                // makes this step's cohesive work exact and the next step's
+                // ½(c_touch − c)Δ_n a loss, never a gain.
+                cohesion_weight = (2.0 * fraction).min(1.0);
                 (fraction * dt, kin.overlap - fraction * approach)
             };
             state.active = true;
@@ -555,7 +586,15 @@ impl ContactLaw for JiangLiu {
             kin.relative_velocity
         };
         let v_n = velocity.dot(n);
-        let force = contact_force(p, &c, state, n, kin.overlap, v_n, velocity - n * v_n);
+        let mut force = contact_force(p, &c, state, n, kin.overlap, v_n, velocity - n * v_n);
+        if cohesion_weight < 1.0 && p.cohesion > 0.0 {
+            // contact_force carries the cohesion as n (1 − α_n) Θ (−c); keep its share.
+            force += n
+                * ((1.0 - p.alpha_n)
+                    * p.heaviside(kin.overlap / c.diameter)
+                    * p.cohesion
+                    * (1.0 - cohesion_weight));
+        }
         state.velocity = kin.relative_velocity;
         let w_e = elastic_potential(p, state.normal_displacement, state.tangential_displacement);
         let w_r = state.relaxation_energy;
