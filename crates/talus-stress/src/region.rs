@@ -461,6 +461,12 @@ pub(crate) struct RegionBoxes {
 }
 
 impl RegionBoxes {
+    /// Whether a grain centre belongs to the region (or to one of its images).
+    #[cfg(test)]
+    pub fn holds(&self, p: DVec3) -> bool {
+        self.held_image(p).is_some()
+    }
+
     /// The image of a grain centre that belongs to the region, with the number of
     /// periods it was moved down a Lees–Edwards gradient axis ([`Bounds::image_inside`]);
     /// the centre itself for the domain; `None` when the grain is not in the region.
