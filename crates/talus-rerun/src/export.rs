@@ -256,16 +256,12 @@ fn log_contact_quantities(
             ) else {
                 continue;
             };
-            let centre = |e: Entity| world.get::<Position>(e).map_or(g.point, |p| p.0);
-            let start = centre(c.a);
-            let end = match c.kind {
-                ContactKind::GrainGrain => match &periodic {
-                    Some(b) => start - b.min_image(start - centre(c.b)),
-                    None => centre(c.b),
-                },
-                ContactKind::GrainWall => g.point,
-            };
-            s.strips.push([to_f32(start), to_f32(end)]);
+            s.strips.push(strip_ends(
+                c,
+                g,
+                |e| world.get::<Position>(e).map(|p| p.0),
+                periodic.as_ref(),
+            ));
             let radius = world.get::<Radius>(c.a).map_or(0.0, |r| r.0);
             s.strip_radii.push((QUANTITY_STRIP_RADIUS * radius) as f32);
         }
@@ -393,6 +389,28 @@ fn log_grains(
     })
 }
 
+/// The ends of a contact's strip: from the centre of `a` to that of the image of `b`
+/// nearest to it (across a periodic seam), or to the contact point for a wall. A
+/// contact's grain is always alive; a centre not found falls back on the contact point
+/// anyway, so that every contact gets its strip.
+fn strip_ends(
+    c: &Contact,
+    g: &ContactGeometry,
+    centre_of: impl Fn(Entity) -> Option<DVec3>,
+    periodic: Option<&PeriodicBox>,
+) -> [[f32; 3]; 2] {
+    let centre = |e: Entity| centre_of(e).unwrap_or(g.point);
+    let start = centre(c.a);
+    let end = match c.kind {
+        ContactKind::GrainGrain => match periodic {
+            Some(b) => start - b.min_image(start - centre(c.b)),
+            None => centre(c.b),
+        },
+        ContactKind::GrainWall => g.point,
+    };
+    [to_f32(start), to_f32(end)]
+}
+
 fn log_force_chains(
     rec: &rerun::RecordingStream,
     s: &mut ExportState,
@@ -407,19 +425,12 @@ fn log_force_chains(
     s.colors.clear();
     let mut max_force = 0.0f64;
     for (c, g, f) in contacts.iter().filter(|(_, g, f)| f.is_active(g)) {
-        // A contact's grain is always alive; fall back on the contact point anyway so
-        // that every contact gets its strip.
-        let centre = |e: Entity| grains.get(e).map_or(g.point, |(p, _, _)| p.0);
-        let start = centre(c.a);
-        let end = match c.kind {
-            // Across a periodic seam, draw the strip to the image of b nearest to a.
-            ContactKind::GrainGrain => match periodic {
-                Some(b) => start - b.min_image(start - centre(c.b)),
-                None => centre(c.b),
-            },
-            ContactKind::GrainWall => g.point,
-        };
-        s.strips.push([to_f32(start), to_f32(end)]);
+        s.strips.push(strip_ends(
+            c,
+            g,
+            |e| grains.get(e).ok().map(|(p, _, _)| p.0),
+            periodic,
+        ));
         let normal_force = f.force.dot(g.normal).abs();
         max_force = max_force.max(normal_force);
         s.normal_forces.push(normal_force);

@@ -11,7 +11,7 @@ use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind};
 use talus_core::prelude::*;
 use talus_core::schedule::{Plugin, SimBuilder, Stage};
 
-use crate::region::{Bounds, DomainInputs, sample_domain};
+use crate::region::{Bounds, DomainInputs, Seams, ShearedSeam, grain_extent, sample_domain};
 use crate::tensor::Tensor;
 
 /// Name of the coarse-graining system in the plan.
@@ -222,16 +222,6 @@ pub struct FieldScratch {
     weights: KernelWeights,
 }
 
-/// The Lees–Edwards seam as the kernel sees it: across the gradient seam a node sees the
-/// image of a point shifted by ∓Δ along the flow axis.
-#[derive(Clone, Copy, Debug)]
-struct KernelShear {
-    flow: usize,
-    gradient: usize,
-    /// Offset Δ of the image one period up the gradient axis, m.
-    offset: f64,
-}
-
 /// Per-axis kernel weights of one point, and under shear the flow-axis weights of its
 /// images one period down, in place and one period up the gradient axis.
 #[derive(Default)]
@@ -249,7 +239,7 @@ impl FieldScratch {
     fn deposit(
         axes: &[Axis; 3],
         weights: &mut KernelWeights,
-        shear: Option<KernelShear>,
+        shear: Option<ShearedSeam>,
         x: DVec3,
         mut add: impl FnMut(usize, f64, i64),
     ) {
@@ -335,20 +325,13 @@ pub fn sample_fields(
     let dims = config.dimension.as_number() as usize;
 
     // The grid: the domain box of the stress sampler.
-    let mut grain_min = DVec3::INFINITY;
-    let mut grain_max = DVec3::NEG_INFINITY;
     let mut total_mass = 0.0;
     let mut total_momentum = DVec3::ZERO;
-    for (p, v, r, m) in &grains {
-        grain_min = grain_min.min(p.0 - DVec3::splat(r.0));
-        grain_max = grain_max.max(p.0 + DVec3::splat(r.0));
+    for (_, v, _, m) in &grains {
         total_mass += m.0;
         total_momentum += m.0 * v.0;
     }
-    if !grain_min.is_finite() || !grain_max.is_finite() {
-        grain_min = DVec3::ZERO;
-        grain_max = DVec3::ZERO;
-    }
+    let (grain_min, grain_max) = grain_extent(grains.iter().map(|(p, _, r, _)| (p.0, r.0)));
     let domain = sample_domain(
         &DomainInputs {
             walls: &snapshot.walls,
@@ -363,21 +346,13 @@ pub fn sample_fields(
         cells[2] = 1;
     }
     let periodic = snapshot.periodic.map_or([false; 3], |b| b.axes);
-    let shear = snapshot.periodic.and_then(|b| {
-        b.shear.map(|s| KernelShear {
-            flow: s.flow,
-            gradient: s.gradient,
-            offset: s.offset,
-        })
-    });
+    let shear = Seams::of(snapshot.periodic.as_ref()).shear;
     // The velocity of the image one period up the gradient axis beyond the grain's own,
     // γ̇ L_g e_f (zero without shear).
-    let image_velocity = snapshot.periodic.map_or(DVec3::ZERO, |b| {
-        b.shear.map_or(DVec3::ZERO, |s| {
-            let mut w = DVec3::ZERO;
-            w[s.flow] = s.rate * b.length()[s.gradient];
-            w
-        })
+    let image_velocity = shear.map_or(DVec3::ZERO, |s| {
+        let mut w = DVec3::ZERO;
+        w[s.flow] = s.image_speed;
+        w
     });
     let axes: [Axis; 3] = std::array::from_fn(|d| Axis {
         min: domain.min[d],
@@ -617,10 +592,11 @@ mod tests {
             axis(20, true, false),
             axis(1, false, true),
         ];
-        let shear = KernelShear {
+        let shear = ShearedSeam {
             flow: 0,
             gradient: 1,
             offset: 0.3,
+            image_speed: 0.0,
         };
         let mut weights = KernelWeights::default();
         let mut deposits = Vec::new();

@@ -175,6 +175,8 @@ pub struct ShearedSeam {
     pub gradient: usize,
     /// Offset Δ of the image one period up the gradient axis, along the flow axis, m.
     pub offset: f64,
+    /// Speed of that image along the flow axis beyond the original's, γ̇ L_g, m/s.
+    pub image_speed: f64,
 }
 
 impl Seams {
@@ -194,6 +196,7 @@ impl Seams {
                 flow: s.flow,
                 gradient: s.gradient,
                 offset: s.offset,
+                image_speed: s.rate * b.length()[s.gradient],
             }),
         })
     }
@@ -376,6 +379,21 @@ impl Bounds {
             }
         }
         total
+    }
+}
+
+/// The grains' extent (lowest and highest surface point along each axis) from their
+/// centres and radii; zero when there is no grain or a position is not finite.
+pub(crate) fn grain_extent(grains: impl Iterator<Item = (DVec3, f64)>) -> (DVec3, DVec3) {
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for (p, r) in grains {
+        lo = lo.min(p - DVec3::splat(r));
+        hi = hi.max(p + DVec3::splat(r));
+    }
+    if lo.is_finite() && hi.is_finite() {
+        (lo, hi)
+    } else {
+        (DVec3::ZERO, DVec3::ZERO)
     }
 }
 
@@ -660,6 +678,7 @@ mod tests {
                 flow: 0,
                 gradient: 1,
                 offset: 0.3,
+                image_speed: 0.0,
             }),
         }
     }

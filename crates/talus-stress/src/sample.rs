@@ -9,7 +9,8 @@ use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind};
 use talus_core::prelude::*;
 
 use crate::region::{
-    Bounds, DomainInputs, RegionBoxes, RegionKind, RegionSpec, Seams, region_boxes, sample_domain,
+    Bounds, DomainInputs, RegionBoxes, RegionKind, RegionSpec, Seams, grain_extent, region_boxes,
+    sample_domain,
 };
 use crate::tensor::Tensor;
 
@@ -247,16 +248,7 @@ pub fn sample_stress(
     };
 
     // The domain box.
-    let mut grain_min = DVec3::INFINITY;
-    let mut grain_max = DVec3::NEG_INFINITY;
-    for (p, _, r, _, _) in &grains {
-        grain_min = grain_min.min(p.0 - DVec3::splat(r.0));
-        grain_max = grain_max.max(p.0 + DVec3::splat(r.0));
-    }
-    if !grain_min.is_finite() || !grain_max.is_finite() {
-        grain_min = DVec3::ZERO;
-        grain_max = DVec3::ZERO;
-    }
+    let (grain_min, grain_max) = grain_extent(grains.iter().map(|(p, _, r, _, _)| (p.0, r.0)));
     // The domain box; along a periodic axis, the periodic box itself.
     let domain = sample_domain(
         &DomainInputs {
@@ -280,16 +272,11 @@ pub fn sample_stress(
     // periodic seam, or a sheared one): its centroid, mean velocity and fluctuations are
     // taken at that image, which moves k γ̇ L_g slower along the flow axis when it is k
     // periods down a Lees–Edwards gradient axis.
-    let shear = snapshot.periodic.and_then(|b| b.shear);
-    let image_speed = snapshot
-        .periodic
-        .zip(shear)
-        .map_or(0.0, |(b, s)| s.rate * b.length()[s.gradient]);
-    let held = |b: &crate::region::RegionBoxes, p: DVec3, v: DVec3| {
+    let held = |b: &RegionBoxes, p: DVec3, v: DVec3| {
         b.held_image(p).map(|(image, periods)| {
             let mut u = v;
-            if let Some(shear) = &shear {
-                u[shear.flow] -= periods * image_speed;
+            if let Some(shear) = &seams.shear {
+                u[shear.flow] -= periods * shear.image_speed;
             }
             (image, u)
         })
@@ -323,6 +310,7 @@ pub fn sample_stress(
     // Under Lees–Edwards shear the kinetic stress takes the peculiar velocity: less the
     // streaming profile γ̇ (x_g − c_g) e_f, i.e. (the profile being linear) less the
     // region's mean and γ̇ (x_g − x̄_g) e_f.
+    let shear = snapshot.periodic.and_then(|b| b.shear);
     // Second pass: fluctuations about the mean (two passes, not Σ m v v − M v̄ v̄, so
     // that a fast-moving region keeps its small fluctuations to full precision).
     for (p, v, _, m, _) in &grains {

@@ -290,7 +290,9 @@ fn rates(
     }
 }
 
-/// Force (28)–(29) on body `a`, along +n for the normal part, N.
+/// Force (28)–(29) on body `a`, along +n for the normal part, N, with the cohesive part
+/// −c of π_n weighted by `cohesion_weight` (1 but in the step a contact starts, §5).
+#[allow(clippy::too_many_arguments)]
 #[inline]
 fn contact_force(
     p: &JiangLiuParams,
@@ -300,9 +302,11 @@ fn contact_force(
     overlap: f64,
     v_n: f64,
     v_t: DVec3,
+    cohesion_weight: f64,
 ) -> DVec3 {
     let theta = p.heaviside(overlap / c.diameter);
     let (pi_n, pi_t) = spring_force(p, state.normal_displacement, state.tangential_displacement);
+    let pi_n = pi_n + (1.0 - cohesion_weight) * p.cohesion;
     let w_quarter = state.relaxation_root.max(0.0).cbrt();
     let eta_n = theta * (p.eta_heat_n + p.eta_relax_n * c.eta_scale * w_quarter);
     let eta_t = theta * (p.eta_heat_t + p.eta_relax_t * c.eta_scale * w_quarter);
@@ -586,15 +590,16 @@ impl ContactLaw for JiangLiu {
             kin.relative_velocity
         };
         let v_n = velocity.dot(n);
-        let mut force = contact_force(p, &c, state, n, kin.overlap, v_n, velocity - n * v_n);
-        if cohesion_weight < 1.0 && p.cohesion > 0.0 {
-            // contact_force carries the cohesion as n (1 − α_n) Θ (−c); keep its share.
-            force += n
-                * ((1.0 - p.alpha_n)
-                    * p.heaviside(kin.overlap / c.diameter)
-                    * p.cohesion
-                    * (1.0 - cohesion_weight));
-        }
+        let force = contact_force(
+            p,
+            &c,
+            state,
+            n,
+            kin.overlap,
+            v_n,
+            velocity - n * v_n,
+            cohesion_weight,
+        );
         state.velocity = kin.relative_velocity;
         let w_e = elastic_potential(p, state.normal_displacement, state.tangential_displacement);
         let w_r = state.relaxation_energy;
