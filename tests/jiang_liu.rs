@@ -10,21 +10,7 @@ mod common;
 
 use talus::cli::ReportSample;
 
-/// Glass-like grains: density, radius, spring constant k ≈ (4/3) E* √R* (E* ≈ 35 GPa).
-const DENSITY: f64 = 2500.0;
-const RADIUS: f64 = 0.005;
-const STIFFNESS: f64 = 2.0e9;
-
-fn grain_mass() -> f64 {
-    DENSITY * 4.0 / 3.0 * std::f64::consts::PI * RADIUS.powi(3)
-}
-
-/// Contact time of f = k δ^{3/2} for the pair's reduced mass at normal speed v (the
-/// Hertz formula 2.943 δ_max / v, δ_max = (5 m* v²/(4k))^{2/5}).
-fn contact_time(v: f64) -> f64 {
-    let m = 0.5 * grain_mass();
-    2.943 * (5.0 * m * v * v / (4.0 * STIFFNESS)).powf(0.4) / v
-}
+use common::jiang_liu_glass::*;
 
 /// Two grains approaching along x at relative speed `v`, impact parameter `offset`
 /// (along y), grain a spinning at `spin` rad/s about z, two steps before touch.

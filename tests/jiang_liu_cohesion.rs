@@ -12,20 +12,7 @@ mod common;
 
 use talus::cli::ReportSample;
 
-/// Glass-like grains (as in `tests/jiang_liu.rs`).
-const DENSITY: f64 = 2500.0;
-const RADIUS: f64 = 0.005;
-const STIFFNESS: f64 = 2.0e9;
-
-fn grain_mass() -> f64 {
-    DENSITY * 4.0 / 3.0 * std::f64::consts::PI * RADIUS.powi(3)
-}
-
-/// Contact time 2.943 δ_max / v of f = k δ^{3/2} for the pair's reduced mass.
-fn contact_time(v: f64) -> f64 {
-    let m = 0.5 * grain_mass();
-    2.943 * (5.0 * m * v * v / (4.0 * STIFFNESS)).powf(0.4) / v
-}
+use common::jiang_liu_glass::*;
 
 /// The automatic step: the contact time at the default characteristic speed 1 m/s over
 /// the default 50 steps per collision.

@@ -7,26 +7,38 @@ use talus::cli::ReportSample;
 
 const PRESSURE: f64 = 2.0e4;
 
-#[test]
-fn a_servo_lid_holds_the_target_pressure() {
-    let text = format!(
+/// 125 glass beads (R = 1 mm) on a simple cubic lattice in a 1 cm square column, no
+/// gravity, sampled every 0.01 s, squeezed by `walls` for `duration` seconds.
+fn squeezed_packing(name: &str, duration: f64, walls: &str) -> String {
+    format!(
         r#"Scene(
-    name: "servo",
+    name: "{name}",
     gravity: (0.0, 0.0, 0.0),
-    duration: 0.15,
+    duration: {duration},
     plugins: ["linear_spring"],
     materials: [(name: "glass", density: 2500.0,
         contact: (law: "linear_spring", stiffness: 1e4, restitution: 0.2, friction: 0.3))],
     walls: [
-        Box(min: (0.0, 0.0, 0.0), max: (0.01, 0.01, 0.1), material: "glass", omit: ["z_max"]),
-        Plane(name: "lid", point: (0.0, 0.0, 0.0102), normal: (0.0, 0.0, -1.0), material: "glass",
-            servo: (pressure: {PRESSURE:e}, area: 1e-4, gain: 0.05, max_speed: 0.05)),
+        {walls}
     ],
     grains: [Lattice(material: "glass", radius: 0.001, region: (min: (0.0, 0.0, 0.0), max: (0.01, 0.01, 0.01)),
         spacing: 0.002)],
     sampling: (interval: 0.01),
     output: (recording: false),
 )"#
+    )
+}
+
+#[test]
+fn a_servo_lid_holds_the_target_pressure() {
+    let text = squeezed_packing(
+        "servo",
+        0.15,
+        &format!(
+            r#"Box(min: (0.0, 0.0, 0.0), max: (0.01, 0.01, 0.1), material: "glass", omit: ["z_max"]),
+        Plane(name: "lid", point: (0.0, 0.0, 0.0102), normal: (0.0, 0.0, -1.0), material: "glass",
+            servo: (pressure: {PRESSURE:e}, area: 1e-4, gain: 0.05, max_speed: 0.05)),"#
+        ),
     );
     let (mut sim, steps) = common::build(&text);
     assert!(
@@ -64,26 +76,16 @@ fn a_servo_lid_holds_the_target_pressure() {
 fn strain_rate_walls_follow_the_exponential_and_the_sampled_stress_matches_their_load() {
     const RATE: f64 = 0.4;
     const GAP: f64 = 0.0102;
-    let text = format!(
-        r#"Scene(
-    name: "strain-rate",
-    gravity: (0.0, 0.0, 0.0),
-    duration: 0.06,
-    plugins: ["linear_spring"],
-    materials: [(name: "glass", density: 2500.0,
-        contact: (law: "linear_spring", stiffness: 1e4, restitution: 0.2, friction: 0.3))],
-    walls: [
-        Box(min: (0.0, 0.0, 0.0), max: (0.01, 0.01, 0.1), material: "glass", omit: ["z_min", "z_max"]),
+    let text = squeezed_packing(
+        "strain-rate",
+        0.06,
+        &format!(
+            r#"Box(min: (0.0, 0.0, 0.0), max: (0.01, 0.01, 0.1), material: "glass", omit: ["z_min", "z_max"]),
         Plane(name: "floor", point: (0.0, 0.0, 0.0), normal: (0.0, 0.0, 1.0), material: "glass",
             strain_rate: (rate: {RATE}, opposite: "lid")),
         Plane(name: "lid", point: (0.0, 0.0, {GAP}), normal: (0.0, 0.0, -1.0), material: "glass",
-            strain_rate: (rate: {RATE}, opposite: "floor")),
-    ],
-    grains: [Lattice(material: "glass", radius: 0.001, region: (min: (0.0, 0.0, 0.0), max: (0.01, 0.01, 0.01)),
-        spacing: 0.002)],
-    sampling: (interval: 0.01),
-    output: (recording: false),
-)"#
+            strain_rate: (rate: {RATE}, opposite: "floor")),"#
+        ),
     );
     let (mut sim, steps) = common::build(&text);
     assert!(

@@ -74,3 +74,26 @@ pub fn build_or_resume(text: &str, resume: Option<&talus::scene::state::SavedSta
     }
     sim
 }
+
+/// The glass-like Jiang–Liu grain pair of the law's tests: density, radius and spring
+/// constant k ≈ (4/3) E* √R* (E* ≈ 35 GPa).
+pub mod jiang_liu_glass {
+    /// Density, kg/m³.
+    pub const DENSITY: f64 = 2500.0;
+    /// Radius, m.
+    pub const RADIUS: f64 = 0.005;
+    /// Spring constant k of f = k δ^{3/2}, N/m^{3/2}.
+    pub const STIFFNESS: f64 = 2.0e9;
+
+    /// Mass of one grain, kg.
+    pub fn grain_mass() -> f64 {
+        DENSITY * 4.0 / 3.0 * std::f64::consts::PI * RADIUS.powi(3)
+    }
+
+    /// Contact time of f = k δ^{3/2} for the pair's reduced mass at normal speed v (the
+    /// Hertz formula 2.943 δ_max / v, δ_max = (5 m* v²/(4k))^{2/5}).
+    pub fn contact_time(v: f64) -> f64 {
+        let m = 0.5 * grain_mass();
+        2.943 * (5.0 * m * v * v / (4.0 * STIFFNESS)).powf(0.4) / v
+    }
+}
