@@ -335,7 +335,26 @@ fn a_settled_frictional_pile_does_not_creep_over_a_million_steps() {
         .fold(0.0, f64::max);
     eprintln!("pile: largest displacement over 1e6 steps {creep:.3e} R");
     assert!(creep < 1e-9, "the pile crept by {creep:e} radii");
-    assert!(course.max_energy_rise <= 1e-12 * course.first.gravity_work.abs().max(1e-12));
+    // At rest each step moves a grain by far less than the spacing of doubles at its
+    // height, so its position still changes by rounding, up or down. The work gravity
+    // can do on such rounding is at most m|g|·½ulp(z) per grain and step: the resolution
+    // of the energy ledger here, about 2e-14 J. The mechanical energy may not rise above
+    // it (measured: the drift is ~1e-15 J over the million steps, its sign set by the
+    // rounding of the rest state).
+    let rounding_floor: f64 = after
+        .iter()
+        .map(|g| g.mass * 9.81 * 0.5 * f64::EPSILON * g.position.z.abs())
+        .sum::<f64>()
+        * 1e6;
+    eprintln!(
+        "pile: mechanical energy rise {:.3e} J, rounding floor {rounding_floor:.3e} J",
+        course.max_energy_rise
+    );
+    assert!(
+        course.max_energy_rise <= rounding_floor,
+        "the pile gained {:e} J at rest (rounding floor {rounding_floor:e} J)",
+        course.max_energy_rise
+    );
 }
 
 #[test]

@@ -195,6 +195,20 @@ pub trait SubModel: Send + Sync + 'static {
         state: &mut ContactState,
         dt: f64,
     );
+
+    /// Called on the normal part once the damping part has run (its force is in
+    /// `state`), before cohesion and the tangential part read the normal force: a normal
+    /// part whose force depends on the damping force (the linear spring's first
+    /// evaluation) finishes here. Does nothing by default.
+    #[inline(always)]
+    fn after_damping(
+        _params: &Self::Params,
+        _kin: &ContactKinematics,
+        _history: &mut Self::History,
+        _state: &mut ContactState,
+        _dt: f64,
+    ) {
+    }
 }
 
 /// The absent part: no parameters, no history, no effect.
@@ -419,6 +433,7 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
         N::evaluate(&p.normal, kin, &mut h.normal, &mut s, dt);
         s.channel_base = b[1];
         D::evaluate(&p.damping, kin, &mut h.damping, &mut s, dt);
+        N::after_damping(&p.normal, kin, &mut h.normal, &mut s, dt);
         s.channel_base = b[2];
         C::evaluate(&p.cohesion, kin, &mut h.cohesion, &mut s, dt);
         s.channel_base = b[3];

@@ -28,6 +28,12 @@ pub struct ContactKinematics {
     /// integrator's trapezoidal rule makes the old and the new force work, so laws that
     /// accumulate springs or dashpot work over it keep the energy balance second order.
     pub displacement: DVec3,
+    /// Overlap at the previous evaluation of this contact, m: zero for a new contact,
+    /// negative once the bodies have parted. Set by [`Self::set_displacement`].
+    pub previous_overlap: f64,
+    /// Unit normal at the previous evaluation of this contact: zero for a new contact.
+    /// Set by [`Self::set_displacement`].
+    pub previous_normal: DVec3,
     /// ω_a − ω_b (ω_a for walls).
     pub relative_omega: DVec3,
     /// Reduced mass m_a m_b / (m_a + m_b) (walls: m_a), kg.
@@ -52,6 +58,8 @@ impl ContactKinematics {
         omega_b: DVec3,
         dt: f64,
     ) -> DVec3 {
+        self.previous_overlap = previous_overlap;
+        self.previous_normal = previous_normal;
         if previous_normal == DVec3::ZERO {
             self.displacement = self.relative_velocity * dt;
             return DVec3::ZERO;
@@ -97,6 +105,8 @@ impl ContactKinematics {
             normal_velocity,
             tangential_velocity: relative_velocity - normal * normal_velocity,
             displacement: DVec3::ZERO,
+            previous_overlap: 0.0,
+            previous_normal: DVec3::ZERO,
             relative_omega: wa - wb,
             // Written as a harmonic sum so that a frozen (infinite-mass) partner gives m_a.
             effective_mass: 1.0 / (1.0 / ma + 1.0 / mb),
@@ -127,6 +137,8 @@ impl ContactKinematics {
             normal_velocity,
             tangential_velocity: relative_velocity - normal * normal_velocity,
             displacement: DVec3::ZERO,
+            previous_overlap: 0.0,
+            previous_normal: DVec3::ZERO,
             relative_omega: wa,
             effective_mass: s.mass[i],
             effective_radius: ra,

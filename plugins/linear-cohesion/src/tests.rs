@@ -59,6 +59,8 @@ fn kinematics(delta: f64, previous_delta: f64, vn: f64) -> ContactKinematics {
         tangential_velocity: DVec3::ZERO,
         // a approaches b (displacement against the normal) when the overlap grows.
         displacement: -normal * (delta - previous_delta),
+        previous_overlap: previous_delta,
+        previous_normal: normal,
         relative_omega: DVec3::ZERO,
         effective_mass: REDUCED_MASS,
         effective_radius: 5e-4,
@@ -199,7 +201,9 @@ fn stored_energy_is_the_integral_of_the_force_from_the_range() {
 fn integration_error_vanishes_where_the_force_is_linear_and_the_path_closes() {
     // A contact entering the range, pressed to 2r, and pulled out again, with no
     // damping: every step where the force is linear over the step books no integration
-    // error; the steps over a kink (the range, touch) book O(k Δδ²).
+    // error; the steps over a kink (the range, touch) book O(k Δδ²), and so does the step
+    // after touch or separation, where the linear spring's first force and its release
+    // pull finish their trapezoidal work (linear_spring's `onset_weight`).
     let p = resolved(&sticky(1.0, 0.0));
     let steps = 2000;
     let path = |k: usize| {
@@ -210,12 +214,15 @@ fn integration_error_vanishes_where_the_force_is_linear_and_the_path_closes() {
     let mut previous = path(0);
     let mut total_error = 0.0;
     let mut kink_bound = 0.0;
+    let mut touch_crossed = false;
     for k in 1..=steps {
         let delta = path(k);
         let r =
             LinearCohesionContact::evaluate(&p, &kinematics(delta, previous, 0.0), &mut h, 1e-5);
         let (lo, hi) = (previous.min(delta), previous.max(delta));
-        let crosses_kink = (lo < -RANGE && hi > -RANGE) || (lo < 0.0 && hi > 0.0);
+        let crosses_touch = lo < 0.0 && hi > 0.0;
+        let crosses_kink = (lo < -RANGE && hi > -RANGE) || crosses_touch || touch_crossed;
+        touch_crossed = crosses_touch;
         let step = hi - lo;
         if crosses_kink {
             kink_bound += (NORMAL_STIFFNESS + ADHESION_STIFFNESS) * step * step;

@@ -6,7 +6,10 @@
 use glam::DVec3;
 use talus_contact::*;
 
-use crate::{LinearSpringLaw, NormalDamping, PARAMS, rotate_into_plane};
+use crate::{
+    LinearSpringLaw, NormalDamping, PARAMS, advance_tangential_spring, normal_spring_release,
+    onset_weight, slip_work, tangential_spring_error,
+};
 
 /// Linear normal spring F = k_n δ. Parameters `stiffness` or `collision_time` (with
 /// `restitution`, which sets the stiffness that gives that time with that damping).
@@ -50,21 +53,40 @@ impl SubModel for LinearNormal {
         _dt: f64,
     ) {
         let delta = kin.overlap;
-        let displacement = kin.displacement;
         if delta <= 0.0 {
-            // Ended: the old spring force worked over half of the step while the
-            // potential fell to zero.
-            s.integration_error =
-                0.5 * h.spring.dot(displacement) - 0.5 * h.spring.length_squared() / k;
-            *h = NormalSpringHistory::default();
+            // Ended, or the release pull's second half-step: see `normal_spring_release`.
+            let (pull, error) = normal_spring_release(k, h.spring, kin);
+            s.normal_elastic = pull;
+            s.integration_error = error;
+            h.spring = kin.normal * pull;
             return;
         }
+        // k δ, which the damping part reads; the spring is finished in `after_damping`.
         s.normal_elastic = k * delta;
         s.normal_stiffness = k;
         s.elastic_energy = 0.5 * k * delta * delta;
-        let spring = kin.normal * (k * delta);
-        s.integration_error = 0.5 * (h.spring + spring).dot(displacement) + 0.5 * k * delta * delta
-            - 0.5 * h.spring.length_squared() / k;
+    }
+
+    /// Finishes the spring once the damping force is known: at a contact's first
+    /// evaluation its force is weighted by [`onset_weight`]; the force is stored and its
+    /// integration error booked (trapezoidal work over the step plus the change of ½k δ²).
+    #[inline]
+    fn after_damping(
+        &k: &f64,
+        kin: &ContactKinematics,
+        h: &mut NormalSpringHistory,
+        s: &mut ContactState,
+        dt: f64,
+    ) {
+        let delta = kin.overlap;
+        if delta <= 0.0 {
+            return;
+        }
+        s.normal_elastic = k * delta * onset_weight(kin, k, s.normal_damping, dt);
+        let spring = kin.normal * s.normal_elastic;
+        s.integration_error = 0.5 * (h.spring + spring).dot(kin.displacement)
+            + 0.5 * k * delta * delta
+            - 0.5 * k * kin.previous_overlap.max(0.0).powi(2);
         h.spring = spring;
     }
 }
@@ -191,11 +213,12 @@ impl SubModel for CoulombSpring {
             // formula below with ξ = 0); the dashpot's last force worked half a step.
             let kt = h.stiffness;
             s.dissipate(0, -0.5 * h.dashpot.dot(displacement));
-            let rotated = rotate_into_plane(h.spring, n);
-            let trial = rotated + tangential_displacement;
-            s.dissipate(1, 0.5 * kt * rotated.dot(trial));
-            s.integration_error +=
-                0.5 * kt * (rotated.dot(tangential_displacement) - h.spring.dot(displacement));
+            let trial = advance_tangential_spring(h.spring, kin);
+            s.dissipate(
+                1,
+                slip_work(kt, trial, DVec3::ZERO, tangential_displacement),
+            );
+            s.integration_error += tangential_spring_error(kt, h.spring, trial, displacement);
             *h = CoulombHistory::default();
             return;
         }
@@ -205,19 +228,17 @@ impl SubModel for CoulombSpring {
         let kt = s.normal_stiffness * p.stiffness_ratio;
         let ct = p.damping_ratio * s.damping_coefficient;
         let vt = kin.tangential_velocity;
-        let rotated = rotate_into_plane(h.spring, n);
-        let mut xi = rotated + tangential_displacement;
+        let trial = advance_tangential_spring(h.spring, kin);
+        let mut xi = trial;
         let mut ft = -kt * xi - ct * vt;
         let cap = p.friction * s.normal_force().abs();
         let ft_len = ft.length();
         if ft_len > cap {
             ft *= cap / ft_len;
-            let trial = xi;
             xi = -(ft + ct * vt) / kt;
-            s.dissipate(1, 0.5 * kt * (rotated + xi).dot(trial - xi));
+            s.dissipate(1, slip_work(kt, trial, xi, tangential_displacement));
         }
-        s.integration_error +=
-            0.5 * kt * (rotated.dot(tangential_displacement) - h.spring.dot(displacement));
+        s.integration_error += tangential_spring_error(kt, h.spring, trial, displacement);
         h.spring = xi;
         h.stiffness = kt;
         s.tangential_force = ft;

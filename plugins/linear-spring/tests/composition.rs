@@ -22,10 +22,14 @@ fn pair(values: &[(&str, f64)]) -> PairAssignment {
 /// A contact path: overlap rising then falling through zero, normal turning, sliding
 /// and sticking tangential motion (a deterministic sequence, no random numbers).
 fn kinematics(step: usize, dt: f64) -> ContactKinematics {
+    let (normal, overlap) = normal_and_overlap(step, dt);
+    // The contact is new at step 1: no previous normal, and it starts mid-step.
+    let (previous_normal, previous_overlap) = if step > 1 {
+        normal_and_overlap(step - 1, dt)
+    } else {
+        (DVec3::ZERO, 0.0)
+    };
     let t = step as f64 * dt;
-    let angle = 0.3 * (t * 40.0).sin();
-    let normal = DVec3::new(angle.sin(), 0.2 * angle, angle.cos()).normalize();
-    let overlap = 2e-5 * (std::f64::consts::PI * t / 0.01).sin();
     let tangent = normal.cross(DVec3::Y).normalize();
     let vt = tangent * (0.05 * (t * 300.0).cos()) + normal.cross(tangent) * 0.01;
     let vn = 2e-5 * std::f64::consts::PI / 0.01 * (std::f64::consts::PI * t / 0.01).cos();
@@ -40,6 +44,8 @@ fn kinematics(step: usize, dt: f64) -> ContactKinematics {
         normal_velocity: relative_velocity.dot(normal),
         tangential_velocity: relative_velocity - normal * relative_velocity.dot(normal),
         displacement: DVec3::ZERO,
+        previous_overlap,
+        previous_normal,
         relative_omega: DVec3::new(1.0, -2.0, 0.5),
         effective_mass: 1e-3,
         effective_radius: 5e-4,
@@ -47,6 +53,14 @@ fn kinematics(step: usize, dt: f64) -> ContactKinematics {
     };
     kin.displacement = kin.relative_velocity * dt;
     kin
+}
+
+/// The normal and overlap of the path at `step`.
+fn normal_and_overlap(step: usize, dt: f64) -> (DVec3, f64) {
+    let t = step as f64 * dt;
+    let angle = 0.3 * (t * 40.0).sin();
+    let normal = DVec3::new(angle.sin(), 0.2 * angle, angle.cos()).normalize();
+    (normal, 2e-5 * (std::f64::consts::PI * t / 0.01).sin())
 }
 
 fn compare(values: &[(&str, f64)]) {

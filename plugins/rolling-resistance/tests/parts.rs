@@ -275,6 +275,9 @@ fn kinematics(step: usize, steps: usize, dt: f64, planar: bool) -> ContactKinema
         normal_velocity: 0.0,
         tangential_velocity: DVec3::ZERO,
         displacement: DVec3::ZERO,
+        // The rolling and twisting parts read neither.
+        previous_overlap: 0.0,
+        previous_normal: DVec3::ZERO,
         relative_omega: omega,
         effective_mass: 1e-3,
         effective_radius: 5e-4,
