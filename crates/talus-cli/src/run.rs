@@ -12,7 +12,7 @@ use serde::Serialize;
 use talus_contact::LawRegistry;
 use talus_core::prelude::*;
 use talus_scene::SceneError;
-use talus_scene::state::SavedState;
+use talus_scene::state::{CompactState, SavedState};
 
 use crate::report::{BlowUpReport, Report, ReportSample, WallClock};
 
@@ -219,7 +219,7 @@ pub fn run_scene(
         blow_up = Some(b);
     } else {
         samples.push(ReportSample::take(&sim.world));
-        last_good = Some(SavedState::capture(&mut sim.world, &built.name));
+        last_good = Some(CompactState::capture(&mut sim.world, &built.name));
         for step in sim.step_count() + 1..=total_steps {
             if let Err(b) = sim.step() {
                 blow_up = Some(b);
@@ -240,7 +240,7 @@ pub fn run_scene(
                 // Drop the old copy first: two whole states at once would double the
                 // run's peak memory.
                 drop(last_good.take());
-                last_good = Some(SavedState::capture(&mut sim.world, &built.name));
+                last_good = Some(CompactState::capture(&mut sim.world, &built.name));
                 if let Some(reason) = requested {
                     stopped = reason;
                     break;
@@ -295,7 +295,7 @@ pub fn run_scene(
         let state_path = out_dir.join("last_good_state.ron");
         let written = last_good
             .as_ref()
-            .map(|s| s.write(&state_path).map_err(RunError::Output))
+            .map(|s| s.to_saved().write(&state_path).map_err(RunError::Output))
             .transpose()?
             .map(|_| state_path.display().to_string());
         let bodies: Vec<String> = b
@@ -312,7 +312,7 @@ pub fn run_scene(
             } else {
                 bodies.join(", ")
             },
-            last_good.as_ref().map(|s| s.step).unwrap_or(0),
+            last_good.as_ref().map(|s| s.step()).unwrap_or(0),
             written.clone().unwrap_or_else(|| "none".into())
         ));
         report.blow_up = Some(BlowUpReport {

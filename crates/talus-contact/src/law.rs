@@ -216,12 +216,6 @@ fn spawn_contact<L: ContactLaw>(world: &mut World, contact: Contact) -> Entity {
         .id()
 }
 
-/// The history of a contact of law `L` as RON text, for a saved state.
-fn contact_history<L: ContactLaw>(world: &World, contact: Entity) -> Option<String> {
-    let state = world.get::<LawState<L::History>>(contact)?;
-    ron::to_string(&state.0).ok()
-}
-
 /// Re-creates a saved contact of law `L`: its geometry and force of the last evaluation
 /// (which the next step reads) and its history parsed from RON text.
 fn restore_contact<L: ContactLaw>(
@@ -284,6 +278,7 @@ pub fn install_law<L: ContactLaw>(
             spawn: spawn_contact::<L>,
             law_type: std::any::type_name::<L>(),
             history: contact_history::<L>,
+            history_text: contact_history_text::<L>,
             restore: restore_contact::<L>,
         });
         law_table.slots[a as usize * n + b as usize] = entry.clone();
@@ -396,4 +391,19 @@ impl LawRegistry {
         }
         out
     }
+}
+
+/// A copy of the history of a contact of law `L`, for an in-memory saved state (the run's
+/// last good state): a plain clone, no text.
+fn contact_history<L: ContactLaw>(
+    world: &World,
+    contact: Entity,
+) -> Option<Box<dyn Any + Send + Sync>> {
+    let state = world.get::<LawState<L::History>>(contact)?;
+    Some(Box::new(state.0.clone()))
+}
+
+/// A history copied by [`contact_history`] as RON text, for a saved state file.
+fn contact_history_text<L: ContactLaw>(history: &(dyn Any + Send + Sync)) -> Option<String> {
+    ron::to_string(history.downcast_ref::<L::History>()?).ok()
 }

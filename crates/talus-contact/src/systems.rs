@@ -24,8 +24,11 @@ pub struct LawSlot {
     pub spawn: fn(&mut World, Contact) -> Entity,
     /// The law's Rust type name: a saved contact is restored only into the same law.
     pub law_type: &'static str,
-    /// The history of one of this law's contacts as RON text (saved states).
-    pub history: fn(&World, Entity) -> Option<String>,
+    /// A copy of the history of one of this law's contacts (in-memory saved states).
+    pub history: fn(&World, Entity) -> Option<Box<dyn std::any::Any + Send + Sync>>,
+    /// A history copied by [`Self::history`] as RON text (saved state files); `None` if
+    /// it is not this law's.
+    pub history_text: fn(&(dyn std::any::Any + Send + Sync)) -> Option<String>,
     /// Re-creates a saved contact with its geometry, force and history (RON text).
     pub restore:
         fn(&mut World, Contact, ContactGeometry, ContactForce, &str) -> Result<Entity, String>,

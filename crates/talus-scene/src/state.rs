@@ -12,6 +12,7 @@
 //!   so no priming pass runs;
 //! * floats are written in Rust's shortest round-trip form and read back exactly.
 
+use std::any::Any;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -151,118 +152,7 @@ pub struct SavedState {
 impl SavedState {
     /// Takes the state of a simulation after a completed step (or the priming pass).
     pub fn capture(world: &mut World, scene: &str) -> Self {
-        let config = world.resource::<SimConfig>().clone();
-        let clock = world.resource::<Clock>().clone();
-        let material_names: Vec<String> = world
-            .resource::<Materials>()
-            .0
-            .iter()
-            .map(|m| m.name.clone())
-            .collect();
-        let mut index: HashMap<Entity, u32> = HashMap::new();
-        let mut grains = Vec::new();
-        let mut grain_material: Vec<u16> = Vec::new();
-        let mut q = world.query_filtered::<(
-            Entity,
-            (&Position, &Velocity, &AngularVelocity, &Radius),
-            (&Mass, &MomentOfInertia, &MaterialId, &Force, &Torque),
-            Has<Frozen>,
-        ), With<Grain>>();
-        for (e, (p, v, w, r), (m, i, mat, f, t), frozen) in q.iter(world) {
-            index.insert(e, grains.len() as u32);
-            grain_material.push(mat.0);
-            grains.push(SavedGrain {
-                position: p.0,
-                velocity: v.0,
-                angular_velocity: w.0,
-                radius: r.0,
-                mass: m.0,
-                inertia: i.0,
-                material: material_names[mat.0 as usize].clone(),
-                frozen,
-                force: f.0,
-                torque: t.0,
-            });
-        }
-        let mut walls = Vec::new();
-        let mut wall_material: HashMap<Entity, (String, u16)> = HashMap::new();
-        let mut q = world.query::<(Entity, &Wall, &WallLoad)>();
-        for (e, w, l) in q.iter(world) {
-            wall_material.insert(e, (w.name.clone(), w.material.0));
-            walls.push(SavedWall {
-                name: w.name.clone(),
-                point: w.point,
-                normal: w.normal,
-                velocity: w.velocity,
-                load: l.0,
-            });
-        }
-        let mut contacts = Vec::new();
-        if let Some(table) = world.get_resource::<ContactLawTable>().cloned() {
-            let mut q = world.query::<(Entity, &Contact, &ContactGeometry, &ContactForce)>();
-            let found: Vec<(Entity, Contact, ContactGeometry, ContactForce)> =
-                q.iter(world).map(|(e, c, g, f)| (e, *c, *g, *f)).collect();
-            for (e, c, g, f) in found {
-                let Some(&a) = index.get(&c.a) else { continue };
-                let (b, mat_b) = match c.kind {
-                    ContactKind::GrainGrain => match index.get(&c.b) {
-                        Some(&j) => (SavedBody::Grain(j), grain_material[j as usize]),
-                        None => continue,
-                    },
-                    ContactKind::GrainWall => match wall_material.get(&c.b) {
-                        Some((name, m)) => (SavedBody::Wall(name.clone()), *m),
-                        None => continue,
-                    },
-                };
-                let Some(slot) = table.get(grain_material[a as usize], mat_b) else {
-                    continue;
-                };
-                let Some(history) = (slot.history)(world, e) else {
-                    continue;
-                };
-                contacts.push(SavedContact {
-                    law: slot.law_type.to_string(),
-                    a,
-                    b,
-                    normal: g.normal,
-                    overlap: g.overlap,
-                    point: g.point,
-                    force: f.force,
-                    torque_a: f.torque_a,
-                    torque_b: f.torque_b,
-                    history,
-                });
-            }
-        }
-        let periodic = world
-            .get_resource::<PeriodicBox>()
-            .map(|b| SavedPeriodicBox {
-                lo: b.lo,
-                hi: b.hi,
-                axes: b.axes,
-            });
-        Self {
-            format: STATE_FORMAT,
-            talus_version: env!("CARGO_PKG_VERSION").to_string(),
-            scene: scene.to_string(),
-            dimension: config.dimension.as_number() as u8,
-            time_step: config.dt,
-            step: clock.step,
-            time: clock.time,
-            periodic,
-            grains,
-            walls,
-            contacts,
-            ledger: world.resource::<EnergyLedger>().clone(),
-            energy: world.resource::<EnergySnapshot>().clone(),
-            deposition: world
-                .get_resource::<crate::packing::Deposition>()
-                .map(|d| d.progress),
-            gear: match config.integrator {
-                Integrator::Gear => world.get_resource::<GearHistory>().cloned(),
-                _ => None,
-            },
-        }
+        CompactState::capture(world, scene).to_saved()
     }
 
     /// Writes the state as RON.
@@ -449,6 +339,242 @@ mod tests {
                     assert_eq!(p[d].to_bits(), q[d].to_bits(), "{} vs {}", p[d], q[d]);
                 }
             }
+        }
+    }
+}
+
+/// One grain of a [`CompactState`]: a [`SavedGrain`] with its material as an index.
+#[derive(Clone, Copy, Debug)]
+struct CompactGrain {
+    position: DVec3,
+    velocity: DVec3,
+    angular_velocity: DVec3,
+    force: DVec3,
+    torque: DVec3,
+    radius: f64,
+    mass: f64,
+    inertia: f64,
+    material: u16,
+    frozen: bool,
+}
+
+/// The second body of a [`CompactContact`].
+#[derive(Clone, Copy, Debug)]
+enum CompactBody {
+    /// A grain, by index in the state's grains.
+    Grain(u32),
+    /// A wall, by index in the state's walls.
+    Wall(u32),
+}
+
+/// One contact of a [`CompactState`]: its law's history is a copy of the law's own value.
+struct CompactContact {
+    a: u32,
+    b: CompactBody,
+    /// The law's Rust type name (see [`SavedContact::law`]).
+    law: &'static str,
+    /// Turns [`Self::history`] into RON text.
+    history_text: fn(&(dyn Any + Send + Sync)) -> Option<String>,
+    geometry: ContactGeometry,
+    force: ContactForce,
+    history: Box<dyn Any + Send + Sync>,
+}
+
+/// The state of a run held in memory, as `talus run` keeps its last good state: what a
+/// [`SavedState`] holds, with materials and walls as indices and each contact's history as
+/// a copy of the law's own value rather than RON text. A contact then takes about a third
+/// of the memory of a [`SavedContact`] (whose history text alone is a few hundred bytes).
+/// [`Self::to_saved`] makes the [`SavedState`] to write.
+pub struct CompactState {
+    /// Everything but the grains and contacts (those lists are empty here).
+    header: SavedState,
+    material_names: Vec<String>,
+    grains: Vec<CompactGrain>,
+    contacts: Vec<CompactContact>,
+}
+
+impl CompactState {
+    /// Takes the state of a simulation after a completed step (or the priming pass).
+    pub fn capture(world: &mut World, scene: &str) -> Self {
+        let config = world.resource::<SimConfig>().clone();
+        let clock = world.resource::<Clock>().clone();
+        let material_names: Vec<String> = world
+            .resource::<Materials>()
+            .0
+            .iter()
+            .map(|m| m.name.clone())
+            .collect();
+        // Grain index of each grain entity, by entity index (no hashing: a state of half a
+        // million grains is taken at every report).
+        let mut index: Vec<u32> = Vec::new();
+        let mut grain_entities: Vec<Entity> = Vec::new();
+        let mut grains = Vec::new();
+        let mut q = world.query_filtered::<(
+            Entity,
+            (&Position, &Velocity, &AngularVelocity, &Radius),
+            (&Mass, &MomentOfInertia, &MaterialId, &Force, &Torque),
+            Has<Frozen>,
+        ), With<Grain>>();
+        for (e, (p, v, w, r), (m, i, mat, f, t), frozen) in q.iter(world) {
+            let slot = e.index_u32() as usize;
+            if index.len() <= slot {
+                index.resize(slot + 1, u32::MAX);
+            }
+            index[slot] = grains.len() as u32;
+            grain_entities.push(e);
+            grains.push(CompactGrain {
+                position: p.0,
+                velocity: v.0,
+                angular_velocity: w.0,
+                force: f.0,
+                torque: t.0,
+                radius: r.0,
+                mass: m.0,
+                inertia: i.0,
+                material: mat.0,
+                frozen,
+            });
+        }
+        let grain_of = |e: Entity| {
+            index
+                .get(e.index_u32() as usize)
+                .copied()
+                .filter(|&k| k != u32::MAX && grain_entities[k as usize] == e)
+        };
+        let mut walls = Vec::new();
+        let mut wall_entities: Vec<(Entity, u16)> = Vec::new();
+        let mut q = world.query::<(Entity, &Wall, &WallLoad)>();
+        for (e, w, l) in q.iter(world) {
+            wall_entities.push((e, w.material.0));
+            walls.push(SavedWall {
+                name: w.name.clone(),
+                point: w.point,
+                normal: w.normal,
+                velocity: w.velocity,
+                load: l.0,
+            });
+        }
+        let mut contacts = Vec::new();
+        if let Some(table) = world.get_resource::<ContactLawTable>().cloned() {
+            let mut q = world.query::<(Entity, &Contact, &ContactGeometry, &ContactForce)>();
+            for (e, c, g, f) in q.iter(world) {
+                let Some(a) = grain_of(c.a) else { continue };
+                let (b, mat_b) = match c.kind {
+                    ContactKind::GrainGrain => match grain_of(c.b) {
+                        Some(j) => (CompactBody::Grain(j), grains[j as usize].material),
+                        None => continue,
+                    },
+                    ContactKind::GrainWall => {
+                        match wall_entities.iter().position(|&(w, _)| w == c.b) {
+                            Some(k) => (CompactBody::Wall(k as u32), wall_entities[k].1),
+                            None => continue,
+                        }
+                    }
+                };
+                let Some(slot) = table.get(grains[a as usize].material, mat_b) else {
+                    continue;
+                };
+                let Some(history) = (slot.history)(world, e) else {
+                    continue;
+                };
+                contacts.push(CompactContact {
+                    a,
+                    b,
+                    law: slot.law_type,
+                    history_text: slot.history_text,
+                    geometry: *g,
+                    force: *f,
+                    history,
+                });
+            }
+        }
+        let periodic = world
+            .get_resource::<PeriodicBox>()
+            .map(|b| SavedPeriodicBox {
+                lo: b.lo,
+                hi: b.hi,
+                axes: b.axes,
+            });
+        let header = SavedState {
+            format: STATE_FORMAT,
+            talus_version: env!("CARGO_PKG_VERSION").to_string(),
+            scene: scene.to_string(),
+            dimension: config.dimension.as_number() as u8,
+            time_step: config.dt,
+            step: clock.step,
+            time: clock.time,
+            periodic,
+            grains: Vec::new(),
+            walls,
+            contacts: Vec::new(),
+            ledger: world.resource::<EnergyLedger>().clone(),
+            energy: world.resource::<EnergySnapshot>().clone(),
+            deposition: world
+                .get_resource::<crate::packing::Deposition>()
+                .map(|d| d.progress),
+            gear: match config.integrator {
+                Integrator::Gear => world.get_resource::<GearHistory>().cloned(),
+                _ => None,
+            },
+        };
+        Self {
+            header,
+            material_names,
+            grains,
+            contacts,
+        }
+    }
+
+    /// Steps done when the state was taken.
+    pub fn step(&self) -> u64 {
+        self.header.step
+    }
+
+    /// The same state as a [`SavedState`], with names and RON text, to write or restore.
+    pub fn to_saved(&self) -> SavedState {
+        let grains = self
+            .grains
+            .iter()
+            .map(|g| SavedGrain {
+                position: g.position,
+                velocity: g.velocity,
+                angular_velocity: g.angular_velocity,
+                radius: g.radius,
+                mass: g.mass,
+                inertia: g.inertia,
+                material: self.material_names[g.material as usize].clone(),
+                frozen: g.frozen,
+                force: g.force,
+                torque: g.torque,
+            })
+            .collect();
+        let contacts = self
+            .contacts
+            .iter()
+            .filter_map(|c| {
+                Some(SavedContact {
+                    law: c.law.to_string(),
+                    a: c.a,
+                    b: match c.b {
+                        CompactBody::Grain(j) => SavedBody::Grain(j),
+                        CompactBody::Wall(k) => {
+                            SavedBody::Wall(self.header.walls[k as usize].name.clone())
+                        }
+                    },
+                    normal: c.geometry.normal,
+                    overlap: c.geometry.overlap,
+                    point: c.geometry.point,
+                    force: c.force.force,
+                    torque_a: c.force.torque_a,
+                    torque_b: c.force.torque_b,
+                    history: (c.history_text)(&*c.history)?,
+                })
+            })
+            .collect();
+        SavedState {
+            grains,
+            contacts,
+            ..self.header.clone()
         }
     }
 }
