@@ -18,15 +18,20 @@ use crate::neighbours::{CHUNK, NeighbourList};
 struct IndexEntry {
     partner: Entity,
     contact: Entity,
-    seen: u64,
+    /// The pass that last found the pair. An entry is dropped the pass after it was not
+    /// found, so only the current and the previous pass are ever compared: a wrapping u32
+    /// is exact.
+    seen: u32,
 }
 
 /// Live contacts of each grain, keyed by the grain entity's index: finding whether a
-/// pair already has a contact is a scan of a handful of entries, no hashing.
+/// pair already has a contact is a scan of a handful of entries, no hashing. Each contact
+/// is entered under its first body only, so a grain holds about half its coordination
+/// number; four entries fit inline (20 bytes each), more spill to the heap.
 #[derive(Resource, Default)]
 pub struct ContactIndex {
-    per_grain: Vec<SmallVec<[IndexEntry; 6]>>,
-    pass: u64,
+    per_grain: Vec<SmallVec<[IndexEntry; 4]>>,
+    pass: u32,
     /// Pairs found touching this pass, per chunk of grains (dense indices; walls are
     /// encoded as `u32::MAX - wall index`).
     found: Vec<Vec<(u32, u32)>>,
@@ -132,7 +137,7 @@ fn update_contacts_inner(
     table: &ContactLawTable,
     s: &GrainSnapshot,
 ) {
-    index.pass += 1;
+    index.pass = index.pass.wrapping_add(1);
     let pass = index.pass;
     let ContactIndex {
         per_grain,

@@ -407,14 +407,16 @@ impl CompactState {
         // Grain index of each grain entity, by entity index (no hashing: a state of half a
         // million grains is taken at every report).
         let mut index: Vec<u32> = Vec::new();
-        let mut grain_entities: Vec<Entity> = Vec::new();
-        let mut grains = Vec::new();
         let mut q = world.query_filtered::<(
             Entity,
             (&Position, &Velocity, &AngularVelocity, &Radius),
             (&Mass, &MomentOfInertia, &MaterialId, &Force, &Torque),
             Has<Frozen>,
         ), With<Grain>>();
+        // Sized once: growing by doubling would hold the old and the new buffer at once.
+        let count = q.iter(world).len();
+        let mut grain_entities: Vec<Entity> = Vec::with_capacity(count);
+        let mut grains = Vec::with_capacity(count);
         for (e, (p, v, w, r), (m, i, mat, f, t), frozen) in q.iter(world) {
             let slot = e.index_u32() as usize;
             if index.len() <= slot {
@@ -457,6 +459,7 @@ impl CompactState {
         let mut contacts = Vec::new();
         if let Some(table) = world.get_resource::<ContactLawTable>().cloned() {
             let mut q = world.query::<(Entity, &Contact, &ContactGeometry, &ContactForce)>();
+            contacts.reserve_exact(q.iter(world).len());
             for (e, c, g, f) in q.iter(world) {
                 let Some(a) = grain_of(c.a) else { continue };
                 let (b, mat_b) = match c.kind {
