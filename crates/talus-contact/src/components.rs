@@ -63,19 +63,31 @@ impl ContactForce {
     }
 }
 
-/// Energy held and dissipated by a contact.
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct ContactEnergy {
+/// Energies of a run of consecutive contacts of one law, summed by the force loop: what
+/// [`crate::systems::apply_contact_forces`] adds into the energy ledger and the energy snapshot.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactEnergySums {
     /// Elastic energy stored now, J.
     pub elastic: f64,
     /// Energy dissipated during the last step, per global dissipation channel, J.
     pub dissipated: [f64; MAX_DISSIPATION_CHANNELS],
-    /// Work done on grain `a` by a moving wall through this contact during the last
-    /// step, by the trapezoidal rule ½(F_old + F_new)·u_wall Δt (zero for grain pairs), J.
+    /// Work done on grains by moving walls through these contacts during the last step,
+    /// by the trapezoidal rule ½(F_old + F_new)·u_wall Δt per contact, J.
     pub boundary_work: f64,
-    /// Energy created by the time integration at this contact during the last step,
+    /// Energy created by the time integration at these contacts during the last step,
     /// as the law measured it ([`crate::ContactResponse::integration_error`]), J.
     pub integration_error: f64,
+}
+
+/// The contact energies of the current step as partial sums, one per chunk of
+/// [`crate::systems::ENERGY_CHUNK_LEN`] contacts: each law's force system appends its chunks in
+/// table order, the laws in schedule order; [`crate::systems::apply_contact_forces`] adds them in
+/// that order and empties the list. Chunks of a fixed length make the sums independent of
+/// the thread count, and no per-contact energy has to be stored.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct ContactEnergyPartials {
+    /// Partial sums of the step, in summation order.
+    pub chunks: Vec<ContactEnergySums>,
 }
 
 /// The law's per-contact history, e.g. a tangential spring.

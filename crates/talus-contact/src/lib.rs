@@ -1,8 +1,9 @@
 //! Talus contacts: contact entities, contact kinematics, and the contact-law extension API.
 //!
 //! A contact entity lives while two bodies touch. It carries the pair ([`Contact`]),
-//! the geometry and force of the last evaluation, the energy it holds and dissipated,
-//! and the law's own per-contact history ([`LawState`]). The core never names a law:
+//! the geometry and force of the last evaluation, and the law's own per-contact history
+//! ([`LawState`]); the force loop sums the contacts' energies chunk by chunk
+//! ([`ContactEnergyPartials`]). The core never names a law:
 //! laws implement [`ContactLaw`] (the typed force routine) and [`LawDescriptor`]
 //! (parameters, validation and installation), and a scene picks them by name. Laws are
 //! usually assembled from sub-models by kind ([`compose`]): normal, damping, tangential,

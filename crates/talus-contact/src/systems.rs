@@ -10,8 +10,10 @@ use crate::components::*;
 use crate::kinematics::ContactKinematics;
 use crate::law::{ContactLaw, LawChannels, PairParams};
 
-/// Contacts below this count are evaluated on one thread.
-const PARALLEL_MIN_LEN: usize = 512;
+/// Contacts per chunk of the force loop: each chunk is evaluated on one thread and sums
+/// its contacts' energies into one [`ContactEnergySums`]. Fixed, not derived from the
+/// thread count, so that the energy sums are the same on any number of threads.
+pub const ENERGY_CHUNK_LEN: usize = 1024;
 
 /// How a new contact between two materials is created: by the law assigned to the pair.
 #[derive(Clone, Debug)]
@@ -68,6 +70,7 @@ impl Plugin for ContactPlugin {
             slots: vec![None; n * n],
             n_materials: n,
         });
+        sim.world.insert_resource(ContactEnergyPartials::default());
         sim.add_system(
             Stage::ApplyContactForces,
             "apply_contact_forces",
@@ -76,74 +79,87 @@ impl Plugin for ContactPlugin {
     }
 }
 
-/// Evaluates law `L` on all of its contacts in parallel, writing geometry, force,
-/// torques and energies into each contact entity.
+/// Evaluates law `L` on all of its contacts in parallel, writing geometry, force and
+/// torques into each contact entity, and appending the contacts' energies, summed per
+/// chunk of [`ENERGY_CHUNK_LEN`] contacts in table order, to [`ContactEnergyPartials`].
 #[allow(clippy::type_complexity)]
 pub fn evaluate_law<L: ContactLaw>(
     snapshot: Res<GrainSnapshot>,
     clock: Res<Clock>,
     params: Res<PairParams<L>>,
     channels: Res<LawChannels<L>>,
+    mut partials: ResMut<ContactEnergyPartials>,
     mut contacts: Query<(
         &Contact,
         &mut LawState<L::History>,
         &mut ContactGeometry,
         &mut ContactForce,
-        &mut ContactEnergy,
     )>,
 ) {
     let dt = clock.pass_dt;
     let snapshot = &*snapshot;
     let params = &params.0;
     let channel_ids = &channels.ids;
-    for (c, mut h, mut g, mut f, mut e) in contacts
+    let evaluate = |c: &Contact,
+                    h: &mut LawState<L::History>,
+                    g: &mut ContactGeometry,
+                    f: &mut ContactForce,
+                    sums: &mut ContactEnergySums| {
+        let Bodies {
+            mut kin,
+            omega_a,
+            omega_b,
+            wall_velocity,
+        } = bodies(snapshot, c);
+        let branch_shift = kin.set_displacement(g.normal, g.overlap, omega_a, omega_b, dt);
+        let old_force = f.force;
+        let r = L::evaluate(&params[c.pair_slot as usize], &kin, &mut h.0, dt);
+        if c.kind == ContactKind::GrainWall {
+            // The old force acted over the first half of the step, the new one acts over
+            // the second: the trapezoidal rule velocity Verlet integrates.
+            sums.boundary_work += 0.5 * (old_force + r.force).dot(wall_velocity) * dt;
+        }
+        *g = ContactGeometry {
+            normal: kin.normal,
+            overlap: kin.overlap,
+            point: kin.point,
+        };
+        *f = ContactForce {
+            force: r.force,
+            torque_a: kin.branch_a.cross(r.force) + r.torque_a,
+            torque_b: kin.branch_b.cross(-r.force) + r.torque_b,
+        };
+        sums.elastic += r.elastic_energy;
+        // The integrator turns the old force with the old branch vectors and the new force
+        // with the new ones; the law worked both over the mean.
+        sums.integration_error +=
+            r.integration_error + 0.25 * (old_force - r.force).dot(branch_shift);
+        for (k, &id) in channel_ids.iter().enumerate() {
+            sums.dissipated[id] += r.dissipated[k];
+        }
+    };
+    let partials = &mut partials.chunks;
+    for (c, mut h, mut g, mut f) in contacts
         .contiguous_iter_mut()
         .expect("contact query is dense")
     {
         let h = h.bypass_change_detection();
         let g = g.bypass_change_detection();
         let f = f.bypass_change_detection();
-        let e = e.bypass_change_detection();
-        c.par_iter()
-            .zip(h.par_iter_mut())
-            .zip(g.par_iter_mut())
-            .zip(f.par_iter_mut())
-            .zip(e.par_iter_mut())
-            .with_min_len(PARALLEL_MIN_LEN)
-            .for_each(|((((c, h), g), f), e)| {
-                let Bodies {
-                    mut kin,
-                    omega_a,
-                    omega_b,
-                    wall_velocity,
-                } = bodies(snapshot, c);
-                let branch_shift = kin.set_displacement(g.normal, g.overlap, omega_a, omega_b, dt);
-                let old_force = f.force;
-                let r = L::evaluate(&params[c.pair_slot as usize], &kin, &mut h.0, dt);
-                // The old force acted over the first half of the step, the new one acts
-                // over the second: the trapezoidal rule velocity Verlet integrates. Zero for
-                // grain pairs (no wall velocity).
-                e.boundary_work = 0.5 * (old_force + r.force).dot(wall_velocity) * dt;
-                *g = ContactGeometry {
-                    normal: kin.normal,
-                    overlap: kin.overlap,
-                    point: kin.point,
-                };
-                *f = ContactForce {
-                    force: r.force,
-                    torque_a: kin.branch_a.cross(r.force) + r.torque_a,
-                    torque_b: kin.branch_b.cross(-r.force) + r.torque_b,
-                };
-                e.elastic = r.elastic_energy;
-                // The integrator turns the old force with the old branch vectors and the
-                // new force with the new ones; the law worked both over the mean.
-                e.integration_error =
-                    r.integration_error + 0.25 * (old_force - r.force).dot(branch_shift);
-                e.dissipated = [0.0; MAX_DISSIPATION_CHANNELS];
-                for (k, &id) in channel_ids.iter().enumerate() {
-                    e.dissipated[id] = r.dissipated[k];
-                }
-            });
+        // An indexed parallel iterator extends the list in chunk order.
+        partials.par_extend(
+            c.par_chunks(ENERGY_CHUNK_LEN)
+                .zip(h.par_chunks_mut(ENERGY_CHUNK_LEN))
+                .zip(g.par_chunks_mut(ENERGY_CHUNK_LEN))
+                .zip(f.par_chunks_mut(ENERGY_CHUNK_LEN))
+                .map(|(((c, h), g), f)| {
+                    let mut sums = ContactEnergySums::default();
+                    for (((c, h), g), f) in c.iter().zip(h).zip(g).zip(f) {
+                        evaluate(c, h, g, f, &mut sums);
+                    }
+                    sums
+                }),
+        );
     }
 }
 
@@ -204,8 +220,9 @@ pub struct ForceAccumulators {
 }
 
 /// Sums contact forces and torques onto grains (overwriting last step's totals) and
-/// walls, and contact energies into the ledger and the energy snapshot. Serial, in
-/// query order, so the sums are bit-reproducible.
+/// walls, and the contact energies the force loops summed per chunk
+/// ([`ContactEnergyPartials`], emptied here) into the ledger and the energy snapshot.
+/// Serial, in query and chunk order, so the sums are bit-reproducible.
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn apply_contact_forces(
     snapshot: Res<GrainSnapshot>,
@@ -213,7 +230,8 @@ pub fn apply_contact_forces(
     channels: Res<DissipationChannels>,
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
-    contacts: Query<(&Contact, &ContactGeometry, &ContactForce, &ContactEnergy)>,
+    mut partials: ResMut<ContactEnergyPartials>,
+    contacts: Query<(&Contact, &ContactGeometry, &ContactForce)>,
     mut grains: Query<(Entity, &mut Force, &mut Torque), With<Grain>>,
     mut walls: Query<(Entity, &mut WallLoad)>,
     mut acc: Local<ForceAccumulators>,
@@ -235,7 +253,7 @@ pub fn apply_contact_forces(
     let mut worst_pair = None;
     let mut wall_work = 0.0;
     let mut dissipated = [0.0; MAX_DISSIPATION_CHANNELS];
-    for (c, g, f, e) in &contacts {
+    for (c, g, f) in &contacts {
         let i = snapshot.dense(c.a).expect("contact grain in snapshot");
         acc.force[i] += f.force;
         acc.torque[i] += f.torque_a;
@@ -250,7 +268,6 @@ pub fn apply_contact_forces(
                 if let Some(w) = snapshot.walls.iter().position(|w| w.entity == c.b) {
                     acc.wall_force[w] -= f.force;
                 }
-                wall_work += e.boundary_work;
                 g.overlap / snapshot.radius[i]
             }
         };
@@ -258,12 +275,15 @@ pub fn apply_contact_forces(
             worst = ratio;
             worst_pair = Some((c.a, c.b));
         }
-        elastic += e.elastic;
-        integration_error += e.integration_error;
-        for (total, d) in dissipated.iter_mut().zip(e.dissipated.iter()) {
+        count += usize::from(f.is_active(g));
+    }
+    for sums in partials.chunks.drain(..) {
+        elastic += sums.elastic;
+        integration_error += sums.integration_error;
+        wall_work += sums.boundary_work;
+        for (total, d) in dissipated.iter_mut().zip(sums.dissipated.iter()) {
             *total += d;
         }
-        count += usize::from(f.is_active(g));
     }
     for (total, d) in ledger.dissipated.iter_mut().zip(dissipated.iter()) {
         *total += d;
