@@ -51,6 +51,18 @@ fn chute_reproduces_lammps_kinetic_energies_over_100_steps() {
         "rotational {}",
         end.rotational_kinetic
     );
+    // The energy ledger of the flow closes: no contact among the frozen base (their
+    // reduced mass would be infinite), every term finite, the bookkeeping balance
+    // constant to rounding against the work of gravity.
+    let bookkeeping = (end.bookkeeping_balance - start.bookkeeping_balance).abs();
+    eprintln!(
+        "chute, 100 steps: gravity work {:.4}, dissipated {:.4}, bookkeeping drift {:.3e} of the gravity work",
+        end.gravity_work,
+        end.dissipated_total,
+        bookkeeping / end.gravity_work
+    );
+    assert!(end.energy_balance.is_finite() && end.dissipated_total > 0.0);
+    assert!(bookkeeping < 1e-9 * end.gravity_work, "{bookkeeping:e}");
 }
 
 /// The 2×2 replica (128,000 grains) is the same flow tiled: it builds without an overlap

@@ -102,13 +102,23 @@ pub fn find_touching_pairs(
             for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
                 let p = s.position[i];
                 let r = s.radius[i];
+                // A frozen grain has an infinite mass in the snapshot. A contact between
+                // two frozen grains, or a frozen grain and a wall, moves nothing, and its
+                // reduced mass (hence a mass-scaled dashpot) would be infinite: none is made.
+                let frozen = s.mass[i].is_infinite();
                 while cursor < candidates.len() && candidates[cursor].0 as usize == i {
                     let j = candidates[cursor].1;
                     cursor += 1;
+                    if frozen && s.mass[j as usize].is_infinite() {
+                        continue;
+                    }
                     let reach = r + s.radius[j as usize] + range;
                     if s.separation(p, s.position[j as usize]).length_squared() < reach * reach {
                         out.push((i as u32, j));
                     }
+                }
+                if frozen {
+                    continue;
                 }
                 for (w, wall) in s.walls.iter().enumerate() {
                     if (p - wall.point).dot(wall.normal) < r + range {
