@@ -77,6 +77,11 @@ pub struct ContactEnergySums {
     /// Energy created by the time integration at these contacts during the last step,
     /// as the law measured it ([`crate::ContactResponse::integration_error`]), J.
     pub integration_error: f64,
+    /// How many of these contacts carry a force ([`ContactForce::is_active`]).
+    pub active: usize,
+    /// The largest overlap over the smaller radius of the pair among these contacts, and
+    /// the first pair (a, b) that reached it; zero and `None` if no contact overlaps.
+    pub worst_overlap: (f64, Option<(Entity, Entity)>),
 }
 
 /// The contact energies of the current step as partial sums, one per chunk of

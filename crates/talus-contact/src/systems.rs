@@ -129,6 +129,11 @@ pub fn evaluate_law<L: ContactLaw>(
             torque_a: kin.branch_a.cross(r.force) + r.torque_a,
             torque_b: kin.branch_b.cross(-r.force) + r.torque_b,
         };
+        sums.active += usize::from(f.is_active(g));
+        let ratio = kin.overlap / kin.min_radius;
+        if ratio > sums.worst_overlap.0 {
+            sums.worst_overlap = (ratio, Some((c.a, c.b)));
+        }
         sums.elastic += r.elastic_energy;
         // The integrator turns the old force with the old branch vectors and the new force
         // with the new ones; the law worked both over the mean.
@@ -231,7 +236,7 @@ pub fn apply_contact_forces(
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
     mut partials: ResMut<ContactEnergyPartials>,
-    contacts: Query<(&Contact, &ContactGeometry, &ContactForce)>,
+    contacts: Query<(&Contact, &ContactForce)>,
     mut grains: Query<(Entity, &mut Force, &mut Torque), With<Grain>>,
     mut walls: Query<(Entity, &mut WallLoad)>,
     mut acc: Local<ForceAccumulators>,
@@ -246,6 +251,25 @@ pub fn apply_contact_forces(
     if ledger.dissipated.len() < channels.names.len() {
         ledger.dissipated.resize(channels.names.len(), 0.0);
     }
+    // The serial part is only the scatter of forces and torques; counts, the worst
+    // overlap and the energies come summed per chunk from the parallel force loop.
+    for (c, f) in &contacts {
+        let i = snapshot.dense(c.a).expect("contact grain in snapshot");
+        acc.force[i] += f.force;
+        acc.torque[i] += f.torque_a;
+        match c.kind {
+            ContactKind::GrainGrain => {
+                let j = snapshot.dense(c.b).expect("contact grain in snapshot");
+                acc.force[j] -= f.force;
+                acc.torque[j] += f.torque_b;
+            }
+            ContactKind::GrainWall => {
+                if let Some(w) = snapshot.walls.iter().position(|w| w.entity == c.b) {
+                    acc.wall_force[w] -= f.force;
+                }
+            }
+        }
+    }
     let mut elastic = 0.0;
     let mut integration_error = 0.0;
     let mut count = 0usize;
@@ -253,36 +277,16 @@ pub fn apply_contact_forces(
     let mut worst_pair = None;
     let mut wall_work = 0.0;
     let mut dissipated = [0.0; MAX_DISSIPATION_CHANNELS];
-    for (c, g, f) in &contacts {
-        let i = snapshot.dense(c.a).expect("contact grain in snapshot");
-        acc.force[i] += f.force;
-        acc.torque[i] += f.torque_a;
-        let ratio = match c.kind {
-            ContactKind::GrainGrain => {
-                let j = snapshot.dense(c.b).expect("contact grain in snapshot");
-                acc.force[j] -= f.force;
-                acc.torque[j] += f.torque_b;
-                g.overlap / snapshot.radius[i].min(snapshot.radius[j])
-            }
-            ContactKind::GrainWall => {
-                if let Some(w) = snapshot.walls.iter().position(|w| w.entity == c.b) {
-                    acc.wall_force[w] -= f.force;
-                }
-                g.overlap / snapshot.radius[i]
-            }
-        };
-        if ratio > worst {
-            worst = ratio;
-            worst_pair = Some((c.a, c.b));
-        }
-        count += usize::from(f.is_active(g));
-    }
     for sums in partials.chunks.drain(..) {
         elastic += sums.elastic;
         integration_error += sums.integration_error;
         wall_work += sums.boundary_work;
         for (total, d) in dissipated.iter_mut().zip(sums.dissipated.iter()) {
             *total += d;
+        }
+        count += sums.active;
+        if sums.worst_overlap.0 > worst {
+            (worst, worst_pair) = sums.worst_overlap;
         }
     }
     for (total, d) in ledger.dissipated.iter_mut().zip(dissipated.iter()) {
