@@ -7,36 +7,20 @@
 
 mod common;
 
+use common::sampling::{field, region, regions};
 use glam::DVec3;
 use talus::contact::{Contact, ContactForce, ContactGeometry, ContactKind};
 use talus::core::prelude::*;
 use talus::core::schedule::Simulation;
-use talus_stress::{FieldRecord, FieldSample, RegionStress, StressRecord, Tensor};
+use talus_stress::{FieldRecord, FieldSample, StressRecord, Tensor};
 
 /// Edge of the periodic cube of the dense gas, m.
 const CUBE: f64 = 0.02;
 
-/// A gas of 800 spheres (radius 0.7–0.9 mm, solid fraction about 0.2) in a box periodic
-/// along every axis, with velocities up to 1 m/s and soft contacts, so that about a
-/// hundred contacts are open at any time, some through the seams. `sampling` is the
-/// scene's sampling section.
+/// The shared glass gas (`common::glass_gas`) in a periodic cube, one step: about a
+/// hundred contacts open at any time, some through the seams.
 fn periodic_gas(sampling: &str) -> String {
-    let (lo, hi) = (0.001, CUBE - 0.001);
-    format!(
-        r#"Scene(
-    name: "periodic-gas",
-    gravity: (0.0, 0.0, 0.0),
-    steps: 1,
-    periodic: (x: (0.0, {CUBE}), y: (0.0, {CUBE}), z: (0.0, {CUBE})),
-    plugins: ["linear_spring"],
-    materials: [(name: "glass", density: 2500.0,
-        contact: (law: "linear_spring", stiffness: 200.0, restitution: 0.8, friction: 0.3))],
-    grains: [Random(material: "glass", region: (min: ({lo}, {lo}, {lo}), max: ({hi}, {hi}, {hi})),
-        count: 800, radius: Uniform(min: 0.0007, max: 0.0009), seed: 5, velocity_spread: 1.0)],
-    {sampling}
-    output: (recording: false),
-)"#
-    )
+    common::glass_gas("periodic-gas", 1, CUBE, "", sampling)
 }
 
 /// A gas between a floor and a lid (z) in a box periodic along x and y, under gravity:
@@ -88,29 +72,6 @@ fn walled_disks(sampling: &str) -> String {
     output: (recording: false),
 )"#
     )
-}
-
-/// The latest field sample.
-fn field(sim: &Simulation) -> FieldSample {
-    sim.world
-        .resource::<FieldRecord>()
-        .latest
-        .clone()
-        .expect("a field sample was taken")
-}
-
-/// The latest stress sample's regions.
-fn regions(sim: &Simulation) -> Vec<RegionStress> {
-    sim.world
-        .resource::<StressRecord>()
-        .latest
-        .clone()
-        .expect("a stress sample was taken")
-        .regions
-}
-
-fn region<'a>(all: &'a [RegionStress], name: &str) -> &'a RegionStress {
-    all.iter().find(|r| r.name == name).expect("region sampled")
 }
 
 /// Σ over the nodes of `value` × cell volume.

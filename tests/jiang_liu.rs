@@ -24,17 +24,10 @@ fn pair_scene(v: f64, offset: f64, spin: f64, dt: f64, contact: &str) -> String 
     time_step: {dt:e},
     plugins: ["jiang_liu", "hertz_mindlin"],
     materials: [(name: "glass", density: {DENSITY:e}, contact: ({contact}))],
-    grains: [List(material: "glass", grains: [
-        (position: ({nx:e}, {ny:e}, 0.0), radius: {RADIUS}, velocity: ({hv:e}, 0.0, 0.0), angular_velocity: (0.0, 0.0, {spin:e})),
-        (position: ({x:e}, {y:e}, 0.0), radius: {RADIUS}, velocity: ({nhv:e}, 0.0, 0.0)),
-    ])],
+    {grains}
     output: (recording: false),
 )"#,
-        nx = -x,
-        ny = -0.5 * offset,
-        y = 0.5 * offset,
-        hv = 0.5 * v,
-        nhv = -0.5 * v,
+        grains = pair_grains(x, offset, v, spin),
     )
 }
 

@@ -34,17 +34,10 @@ fn pair_scene(v: f64, offset: f64, cohesion: f64, phase: f64) -> String {
     plugins: ["jiang_liu"],
     materials: [(name: "glass", density: {DENSITY:e},
         contact: (law: "jiang_liu", stiffness: {STIFFNESS:e}, cohesion: {cohesion:e}))],
-    grains: [List(material: "glass", grains: [
-        (position: ({nx:e}, {ny:e}, 0.0), radius: {RADIUS}, velocity: ({hv:e}, 0.0, 0.0)),
-        (position: ({x:e}, {y:e}, 0.0), radius: {RADIUS}, velocity: ({nhv:e}, 0.0, 0.0)),
-    ])],
+    {grains}
     output: (recording: false),
 )"#,
-        nx = -x,
-        ny = -0.5 * offset,
-        y = 0.5 * offset,
-        hv = 0.5 * v,
-        nhv = -0.5 * v,
+        grains = pair_grains(x, offset, v, 0.0),
     )
 }
 

@@ -7,13 +7,14 @@
 
 mod common;
 
+use common::sampling::{field, regions};
 use glam::DVec3;
 use talus::contact::{Contact, ContactForce, ContactGeometry, ContactKind};
 use talus::core::periodic::PeriodicBox;
 use talus::core::prelude::*;
 use talus::core::schedule::Simulation;
 use talus::scene::state::SavedState;
-use talus_stress::{FieldRecord, FieldSample, RegionStress, StressRecord, Tensor};
+use talus_stress::{FieldRecord, StressRecord, Tensor};
 
 /// Edge of the periodic cube, m.
 const CUBE: f64 = 0.02;
@@ -25,23 +26,8 @@ const RATE: f64 = 50.0;
 /// hundred are open at a time, some through the sheared seam. `sampling` is the scene's
 /// sampling section.
 fn sheared_gas(sampling: &str, steps: u64) -> String {
-    let (lo, hi) = (0.001, CUBE - 0.001);
-    format!(
-        r#"Scene(
-    name: "sheared-gas",
-    gravity: (0.0, 0.0, 0.0),
-    steps: {steps},
-    periodic: (x: (0.0, {CUBE}), y: (0.0, {CUBE}), z: (0.0, {CUBE}),
-        shear: (rate: {RATE:e}, flow: "x", gradient: "z")),
-    plugins: ["linear_spring"],
-    materials: [(name: "glass", density: 2500.0,
-        contact: (law: "linear_spring", stiffness: 200.0, restitution: 0.8, friction: 0.3))],
-    grains: [Random(material: "glass", region: (min: ({lo}, {lo}, {lo}), max: ({hi}, {hi}, {hi})),
-        count: 800, radius: Uniform(min: 0.0007, max: 0.0009), seed: 5, velocity_spread: 1.0)],
-    {sampling}
-    output: (recording: false),
-)"#
-    )
+    let shear = format!(",\n        shear: (rate: {RATE:e}, flow: \"x\", gradient: \"z\")");
+    common::glass_gas("sheared-gas", steps, CUBE, &shear, sampling)
 }
 
 /// The offset Δ of the sheared images at the current step, checked against the
@@ -149,25 +135,6 @@ fn branches(sim: &mut Simulation, shifts: &[(i32, DVec3)]) -> Vec<Branch> {
         });
     }
     out
-}
-
-/// The latest stress sample's regions.
-fn regions(sim: &Simulation) -> Vec<RegionStress> {
-    sim.world
-        .resource::<StressRecord>()
-        .latest
-        .clone()
-        .expect("a stress sample was taken")
-        .regions
-}
-
-/// The latest field sample.
-fn field(sim: &Simulation) -> FieldSample {
-    sim.world
-        .resource::<FieldRecord>()
-        .latest
-        .clone()
-        .expect("a field sample was taken")
 }
 
 /// The tiling of the cell: cuts along x, y and z, each list spanning one period and

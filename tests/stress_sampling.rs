@@ -6,25 +6,11 @@
 
 mod common;
 
+use common::sampling::{region, regions};
 use glam::DVec3;
 use talus::core::prelude::*;
 use talus::core::schedule::Simulation;
 use talus_stress::{RegionStress, StressRecord, Tensor};
-
-/// The latest stress sample's regions.
-fn regions(sim: &Simulation) -> Vec<RegionStress> {
-    sim.world
-        .resource::<StressRecord>()
-        .latest
-        .clone()
-        .expect("a stress sample was taken")
-        .regions
-}
-
-/// The region of that name.
-fn region<'a>(all: &'a [RegionStress], name: &str) -> &'a RegionStress {
-    all.iter().find(|r| r.name == name).expect("region sampled")
-}
 
 /// Load on a wall by name, N (force the grains exert on it).
 fn wall_load(sim: &mut Simulation, name: &str) -> DVec3 {

@@ -90,10 +90,80 @@ pub mod jiang_liu_glass {
         DENSITY * 4.0 / 3.0 * std::f64::consts::PI * RADIUS.powi(3)
     }
 
+    /// The scene's `grains:` entry for the pair: centres at ∓x along x and ∓offset/2
+    /// along y, approaching at relative speed `v` along x, the first spinning at `spin`
+    /// rad/s about z.
+    pub fn pair_grains(x: f64, offset: f64, v: f64, spin: f64) -> String {
+        format!(
+            r#"grains: [List(material: "glass", grains: [
+        (position: ({nx:e}, {ny:e}, 0.0), radius: {RADIUS}, velocity: ({hv:e}, 0.0, 0.0), angular_velocity: (0.0, 0.0, {spin:e})),
+        (position: ({x:e}, {y:e}, 0.0), radius: {RADIUS}, velocity: ({nhv:e}, 0.0, 0.0)),
+    ])],"#,
+            nx = -x,
+            ny = -0.5 * offset,
+            y = 0.5 * offset,
+            hv = 0.5 * v,
+            nhv = -0.5 * v,
+        )
+    }
+
     /// Contact time of f = k δ^{3/2} for the pair's reduced mass at normal speed v (the
     /// Hertz formula 2.943 δ_max / v, δ_max = (5 m* v²/(4k))^{2/5}).
     pub fn contact_time(v: f64) -> f64 {
         let m = 0.5 * grain_mass();
         2.943 * (5.0 * m * v * v / (4.0 * STIFFNESS)).powf(0.4) / v
+    }
+}
+
+/// A gas of 800 glass grains (radii 0.7–0.9 mm, speeds up to 1 m/s, soft frictional
+/// contacts) filling a cube of edge `cube` that is periodic along every axis, without
+/// gravity. `shear` is appended inside `periodic:` (empty, or `,\n        shear: (...)` for
+/// a Lees–Edwards cell); `sampling` is the scene's sampling section.
+pub fn glass_gas(name: &str, steps: u64, cube: f64, shear: &str, sampling: &str) -> String {
+    let (lo, hi) = (0.001, cube - 0.001);
+    format!(
+        r#"Scene(
+    name: "{name}",
+    gravity: (0.0, 0.0, 0.0),
+    steps: {steps},
+    periodic: (x: (0.0, {cube}), y: (0.0, {cube}), z: (0.0, {cube}){shear}),
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 200.0, restitution: 0.8, friction: 0.3))],
+    grains: [Random(material: "glass", region: (min: ({lo}, {lo}, {lo}), max: ({hi}, {hi}, {hi})),
+        count: 800, radius: Uniform(min: 0.0007, max: 0.0009), seed: 5, velocity_spread: 1.0)],
+    {sampling}
+    output: (recording: false),
+)"#
+    )
+}
+
+/// The latest samples of stress regions and coarse-grained fields.
+pub mod sampling {
+    use talus::core::schedule::Simulation;
+    use talus_stress::{FieldRecord, FieldSample, RegionStress, StressRecord};
+
+    /// The latest stress sample's regions.
+    pub fn regions(sim: &Simulation) -> Vec<RegionStress> {
+        sim.world
+            .resource::<StressRecord>()
+            .latest
+            .clone()
+            .expect("a stress sample was taken")
+            .regions
+    }
+
+    /// The region of that name.
+    pub fn region<'a>(all: &'a [RegionStress], name: &str) -> &'a RegionStress {
+        all.iter().find(|r| r.name == name).expect("region sampled")
+    }
+
+    /// The latest field sample.
+    pub fn field(sim: &Simulation) -> FieldSample {
+        sim.world
+            .resource::<FieldRecord>()
+            .latest
+            .clone()
+            .expect("a field sample was taken")
     }
 }

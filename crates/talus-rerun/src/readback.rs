@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use rerun::external::arrow::array::{Array as _, AsArray as _};
+use rerun::external::arrow::array::{Array, AsArray as _};
 use rerun::external::arrow::datatypes::Float64Type;
 use rerun::{ChunkStore, ChunkStoreConfig, StoreKind, TimelineName};
 
@@ -56,12 +56,7 @@ pub fn read_counts(path: impl AsRef<Path>) -> Result<Vec<FrameCounts>, String> {
                 continue;
             };
             let lists = &column.list_array;
-            for (row, &step) in steps.times_raw().iter().enumerate() {
-                if lists.is_null(row) {
-                    continue;
-                }
-                let step = u64::try_from(step)
-                    .map_err(|_| format!("negative step {step} in {}", path.display()))?;
+            for (row, step) in logged_rows(steps.times_raw(), lists, path)? {
                 let count = lists.value_length(row) as usize;
                 let frame = frames.entry(step).or_insert(FrameCounts {
                     step,
@@ -79,6 +74,21 @@ pub fn read_counts(path: impl AsRef<Path>) -> Result<Vec<FrameCounts>, String> {
         }
     }
     Ok(frames.into_values().collect())
+}
+
+/// The rows of a chunk's component column that hold a value, with their step (the chunk's
+/// step times); an error names the file if a step is negative.
+fn logged_rows(steps: &[i64], lists: &dyn Array, path: &Path) -> Result<Vec<(usize, u64)>, String> {
+    let mut rows = Vec::with_capacity(steps.len());
+    for (row, &step) in steps.iter().enumerate() {
+        if lists.is_null(row) {
+            continue;
+        }
+        let step = u64::try_from(step)
+            .map_err(|_| format!("negative step {step} in {}", path.display()))?;
+        rows.push((row, step));
+    }
+    Ok(rows)
 }
 
 /// Reads the per-contact values of one contact quantity of one law back from the
@@ -112,12 +122,7 @@ pub fn read_contact_quantity(
                 continue;
             };
             let lists = &column.list_array;
-            for (row, &step) in steps.times_raw().iter().enumerate() {
-                if lists.is_null(row) {
-                    continue;
-                }
-                let step = u64::try_from(step)
-                    .map_err(|_| format!("negative step {step} in {}", path.display()))?;
+            for (row, step) in logged_rows(steps.times_raw(), lists, path)? {
                 let values = lists.value(row);
                 let values = values
                     .as_primitive_opt::<Float64Type>()
