@@ -13,6 +13,9 @@ use talus_core::snapshot::GrainSnapshot;
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, NeighbourList};
 
+/// Body codes above this in a found pair are walls: `u32::MAX - wall index`.
+const WALL_CODES: u32 = u32::MAX - 1024;
+
 /// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]
 struct IndexEntry {
@@ -24,25 +27,37 @@ struct IndexEntry {
     seen: u32,
 }
 
-/// Live contacts of each grain, keyed by the grain entity's index: finding whether a
-/// pair already has a contact is a scan of a handful of entries, no hashing. Each contact
+/// Live contacts of each grain, by the grain's dense index in the snapshot: finding
+/// whether a pair already has a contact is a scan of a handful of entries, no hashing,
+/// and each chunk of grains owns its slice of the index, so the narrow phase's
+/// bookkeeping runs in parallel over the same chunks as the overlap tests. Each contact
 /// is entered under its first body only, so a grain holds about half its coordination
-/// number; four entries fit inline (20 bytes each), more spill to the heap.
+/// number; four entries fit inline (20 bytes each), more spill to the heap. When the
+/// snapshot's grain order changes (grains added or removed, a component set changed) the
+/// index is re-keyed by entity before the next pass.
 #[derive(Resource, Default)]
 pub struct ContactIndex {
+    /// Live contacts of each grain, by dense index in the order of `entities`.
     per_grain: Vec<SmallVec<[IndexEntry; 4]>>,
+    /// The grain entities in the dense order `per_grain` is keyed by.
+    entities: Vec<Entity>,
+    /// Contacts restored from a saved state before the snapshot knew their grains'
+    /// dense indices: (first body, second body, contact), entered at the next pass.
+    pending: Vec<(Entity, Entity, Entity)>,
     pass: u32,
     /// Pairs found touching this pass, per chunk of grains (dense indices; walls are
     /// encoded as `u32::MAX - wall index`).
     found: Vec<Vec<(u32, u32)>>,
-    /// Contacts that ended this pass (scratch).
-    ended: Vec<Entity>,
+    /// Per chunk of grains: the touching pairs that have no contact yet (scratch).
+    new_pairs: Vec<Vec<(u32, u32)>>,
+    /// Per chunk of grains: the contacts that ended this pass (scratch).
+    ended: Vec<Vec<Entity>>,
 }
 
 impl ContactIndex {
     /// Number of live contacts.
     pub fn len(&self) -> usize {
-        self.per_grain.iter().map(|v| v.len()).sum()
+        self.per_grain.iter().map(|v| v.len()).sum::<usize>() + self.pending.len()
     }
 
     /// Whether there is no live contact.
@@ -50,30 +65,59 @@ impl ContactIndex {
         self.len() == 0
     }
 
-    /// The contact entity of a pair, if they are in contact (in either order).
+    /// The contact entity of a pair, if they are in contact (in either order). A scan of
+    /// the grain list: for inspection, not for hot loops.
     pub fn contact_between(&self, a: Entity, b: Entity) -> Option<Entity> {
         let find = |first: Entity, second: Entity| {
-            self.per_grain
-                .get(first.index_u32() as usize)?
+            let pending = self
+                .pending
+                .iter()
+                .find(|&&(x, y, _)| x == first && y == second)
+                .map(|&(_, _, c)| c);
+            let k = self.entities.iter().position(|&e| e == first)?;
+            self.per_grain[k]
                 .iter()
                 .find(|e| e.partner == second)
                 .map(|e| e.contact)
+                .or(pending)
         };
         find(a, b).or_else(|| find(b, a))
     }
 
     /// Enters an existing contact entity between grain `a` (the contact's first body) and
-    /// body `b`: for contacts restored from a saved state.
+    /// body `b`: for contacts restored from a saved state. It is keyed by its grain's
+    /// dense index at the next narrow phase.
     pub fn register(&mut self, a: Entity, b: Entity, contact: Entity) {
-        let k = a.index_u32() as usize;
-        if self.per_grain.len() <= k {
-            self.per_grain.resize_with(k + 1, SmallVec::new);
+        self.pending.push((a, b, contact));
+    }
+
+    /// Keys the index by the snapshot's dense order (re-keying it by entity if the order
+    /// changed) and enters the pending contacts. Adds to `orphans` the contacts whose first
+    /// grain is no longer in the snapshot.
+    fn key_by(&mut self, s: &GrainSnapshot, orphans: &mut Vec<Entity>) {
+        if self.entities != s.entity {
+            let mut old = std::mem::take(&mut self.per_grain);
+            self.per_grain.resize_with(s.len(), SmallVec::new);
+            for (k, &e) in self.entities.iter().enumerate() {
+                match s.dense(e) {
+                    Some(d) => self.per_grain[d] = std::mem::take(&mut old[k]),
+                    None => orphans.extend(old[k].iter().map(|entry| entry.contact)),
+                }
+            }
+            self.entities.clone_from(&s.entity);
         }
-        self.per_grain[k].push(IndexEntry {
-            partner: b,
-            contact,
-            seen: self.pass,
-        });
+        // A restored contact counts as found at the previous pass, like a live one.
+        let seen = self.pass;
+        for (a, b, contact) in self.pending.drain(..) {
+            match s.dense(a) {
+                Some(d) => self.per_grain[d].push(IndexEntry {
+                    partner: b,
+                    contact,
+                    seen,
+                }),
+                None => orphans.push(contact),
+            }
+        }
     }
 }
 
@@ -147,85 +191,121 @@ fn update_contacts_inner(
     table: &ContactLawTable,
     s: &GrainSnapshot,
 ) {
+    let mut orphans = Vec::new();
+    index.key_by(s, &mut orphans);
     index.pass = index.pass.wrapping_add(1);
     let pass = index.pass;
+    let chunks = s.len().div_ceil(CHUNK);
     let ContactIndex {
         per_grain,
         found,
+        new_pairs,
         ended,
         ..
     } = index;
-    let max_entity = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
-    if per_grain.len() <= max_entity {
-        per_grain.resize_with(max_entity + 1, SmallVec::new);
+    if new_pairs.len() < chunks {
+        new_pairs.resize_with(chunks, Vec::new);
     }
-    let chunks = s.len().div_ceil(CHUNK);
-    for list in &found[..chunks] {
-        for &(i, j) in list {
-            let ea = s.entity[i as usize];
-            let (a, b, kind, mat_b) = if j > u32::MAX - 1024 {
-                let wall = &s.walls[(u32::MAX - j) as usize];
-                (ea, wall.entity, ContactKind::GrainWall, wall.material)
-            } else {
-                // The grain first in dense order is `a` (never the entity ids, which
-                // depend on the history of spawns: a restored run must choose alike).
-                (
-                    ea,
-                    s.entity[j as usize],
-                    ContactKind::GrainGrain,
-                    s.material[j as usize],
-                )
-            };
-            let entries = &mut per_grain[a.index_u32() as usize];
-            if let Some(entry) = entries.iter_mut().find(|e| e.partner == b) {
-                entry.seen = pass;
-                continue;
-            }
-            let Some(slot) = table.get(s.material[i as usize], mat_b) else {
-                continue; // this material pair does not interact
-            };
-            let contact = (slot.spawn)(
-                world,
-                Contact {
-                    a,
-                    b,
-                    kind,
-                    pair_slot: slot.pair_slot,
-                },
-            );
-            per_grain[a.index_u32() as usize].push(IndexEntry {
-                partner: b,
-                contact,
-                seen: pass,
-            });
-        }
+    if ended.len() < chunks {
+        ended.resize_with(chunks, Vec::new);
     }
-    ended.clear();
-    for entries in per_grain.iter_mut() {
-        entries.retain(|e| {
-            if e.seen == pass {
-                return true;
+    if found.len() < chunks {
+        found.resize_with(chunks, Vec::new);
+    }
+    // Each chunk of grains owns its slice of the index: marking the pairs found again,
+    // listing the new ones and dropping the ended ones run in parallel; only spawning and
+    // despawning entities, which change the world's tables, are serial.
+    let view: &World = world;
+    per_grain
+        .par_chunks_mut(CHUNK)
+        .zip(found[..chunks].par_iter())
+        .zip(new_pairs[..chunks].par_iter_mut())
+        .zip(ended[..chunks].par_iter_mut())
+        .enumerate()
+        .for_each(|(chunk, (((entries, pairs), new), gone))| {
+            let base = chunk * CHUNK;
+            new.clear();
+            gone.clear();
+            for &(i, j) in pairs {
+                let (b, mat_b) = body(s, j);
+                if let Some(entry) = entries[i as usize - base]
+                    .iter_mut()
+                    .find(|e| e.partner == b)
+                {
+                    entry.seen = pass;
+                } else if table.get(s.material[i as usize], mat_b).is_some() {
+                    new.push((i, j));
+                }
             }
-            // A pair that stopped touching keeps its contact for one more evaluation
-            // (with no force), so that the law books the work done in the step in
-            // which the contact ended; it goes at the next pass.
-            let acted = world
-                .get::<ContactGeometry>(e.contact)
-                .zip(world.get::<ContactForce>(e.contact))
-                .is_some_and(|(g, f)| f.is_active(g));
-            if !acted {
-                ended.push(e.contact);
+            for list in entries.iter_mut() {
+                list.retain(|e| {
+                    if e.seen == pass {
+                        return true;
+                    }
+                    // A pair that stopped touching keeps its contact for one more
+                    // evaluation (with no force), so that the law books the work done in
+                    // the step in which the contact ended; it goes at the next pass.
+                    let acted = view
+                        .get::<ContactGeometry>(e.contact)
+                        .zip(view.get::<ContactForce>(e.contact))
+                        .is_some_and(|(g, f)| f.is_active(g));
+                    if !acted {
+                        gone.push(e.contact);
+                    }
+                    acted
+                });
             }
-            acted
+        });
+    // New contacts are spawned in the order the pairs were found (chunk by chunk, grain
+    // by grain, partner by partner): a fixed function of the state.
+    for &(i, j) in new_pairs[..chunks].iter().flatten() {
+        let (b, mat_b) = body(s, j);
+        let kind = if j > WALL_CODES {
+            ContactKind::GrainWall
+        } else {
+            ContactKind::GrainGrain
+        };
+        let slot = table
+            .get(s.material[i as usize], mat_b)
+            .expect("the parallel pass kept only interacting pairs");
+        // The grain first in dense order is `a` (never the entity ids, which depend on
+        // the history of spawns: a restored run must choose alike).
+        let a = s.entity[i as usize];
+        let contact = (slot.spawn)(
+            world,
+            Contact {
+                a,
+                b,
+                kind,
+                pair_slot: slot.pair_slot,
+            },
+        );
+        per_grain[i as usize].push(IndexEntry {
+            partner: b,
+            contact,
+            seen: pass,
         });
     }
     // Despawning moves the last contact of the table into the freed row, so the order of
     // removals sets the order in which forces are summed from then on. Remove in table
     // order (a fixed function of the state, not of entity ids or of the index's
     // layout), last row first so that no removal moves a contact still to be removed.
-    ended
+    orphans.retain(|&c| world.get_entity(c).is_ok());
+    orphans.extend(ended[..chunks].iter().flatten().copied());
+    orphans
         .sort_unstable_by_key(|&c| std::cmp::Reverse(world.entity(c).location().table_row.index()));
-    for &c in ended.iter() {
+    for &c in orphans.iter() {
         world.despawn(c);
+    }
+}
+
+/// The entity and material of a found pair's second body (grain index or wall code).
+#[inline]
+fn body(s: &GrainSnapshot, j: u32) -> (Entity, u16) {
+    if j > WALL_CODES {
+        let wall = &s.walls[(u32::MAX - j) as usize];
+        (wall.entity, wall.material)
+    } else {
+        (s.entity[j as usize], s.material[j as usize])
     }
 }

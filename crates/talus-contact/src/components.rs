@@ -26,6 +26,35 @@ pub struct Contact {
     pub pair_slot: u32,
 }
 
+/// Where a contact's bodies sit in this step's [`talus_core::snapshot::GrainSnapshot`],
+/// written by the force loop: the summation of contact forces onto grains reads these
+/// instead of looking the entities up again.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ContactBodies {
+    /// Dense index of grain `a`.
+    pub a: u32,
+    /// Dense index of grain `b`, or [`WALL_BODY_BASE`] plus the wall's index in the
+    /// snapshot's walls for a grain–wall contact.
+    pub b: u32,
+}
+
+/// [`ContactBodies::b`] at or above this is a wall: `b - WALL_BODY_BASE` is its index.
+pub const WALL_BODY_BASE: u32 = u32::MAX - 1024;
+
+impl ContactBodies {
+    /// The dense index of `b` if it is a grain.
+    #[inline]
+    pub fn grain_b(&self) -> Option<usize> {
+        (self.b < WALL_BODY_BASE).then_some(self.b as usize)
+    }
+
+    /// The index of `b` among the snapshot's walls if it is a wall.
+    #[inline]
+    pub fn wall_b(&self) -> Option<usize> {
+        (self.b >= WALL_BODY_BASE).then(|| (self.b - WALL_BODY_BASE) as usize)
+    }
+}
+
 /// Geometry of the last evaluation.
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct ContactGeometry {

@@ -210,6 +210,7 @@ fn spawn_contact<L: ContactLaw>(world: &mut World, contact: Contact) -> Entity {
             contact,
             ContactGeometry::default(),
             ContactForce::default(),
+            ContactBodies::default(),
             LawState::<L::History>(L::History::default()),
         ))
         .id()
@@ -226,7 +227,13 @@ fn restore_contact<L: ContactLaw>(
 ) -> Result<Entity, String> {
     let history: L::History = ron::from_str(history).map_err(|e| e.to_string())?;
     Ok(world
-        .spawn((contact, geometry, force, LawState::<L::History>(history)))
+        .spawn((
+            contact,
+            geometry,
+            force,
+            ContactBodies::default(),
+            LawState::<L::History>(history),
+        ))
         .id())
 }
 

@@ -94,6 +94,7 @@ pub fn evaluate_law<L: ContactLaw>(
         &mut LawState<L::History>,
         &mut ContactGeometry,
         &mut ContactForce,
+        &mut ContactBodies,
     )>,
 ) {
     let dt = clock.pass_dt;
@@ -104,13 +105,16 @@ pub fn evaluate_law<L: ContactLaw>(
                     h: &mut LawState<L::History>,
                     g: &mut ContactGeometry,
                     f: &mut ContactForce,
+                    indices: &mut ContactBodies,
                     sums: &mut ContactEnergySums| {
         let Bodies {
             mut kin,
             omega_a,
             omega_b,
             wall_velocity,
+            indices: dense,
         } = bodies(snapshot, c);
+        *indices = dense;
         let branch_shift = kin.set_displacement(g.normal, g.overlap, omega_a, omega_b, dt);
         let old_force = f.force;
         let r = L::evaluate(&params[c.pair_slot as usize], &kin, &mut h.0, dt);
@@ -144,23 +148,25 @@ pub fn evaluate_law<L: ContactLaw>(
         }
     };
     let partials = &mut partials.chunks;
-    for (c, mut h, mut g, mut f) in contacts
+    for (c, mut h, mut g, mut f, mut d) in contacts
         .contiguous_iter_mut()
         .expect("contact query is dense")
     {
         let h = h.bypass_change_detection();
         let g = g.bypass_change_detection();
         let f = f.bypass_change_detection();
+        let d = d.bypass_change_detection();
         // An indexed parallel iterator extends the list in chunk order.
         partials.par_extend(
             c.par_chunks(ENERGY_CHUNK_LEN)
                 .zip(h.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .zip(g.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .zip(f.par_chunks_mut(ENERGY_CHUNK_LEN))
-                .map(|(((c, h), g), f)| {
+                .zip(d.par_chunks_mut(ENERGY_CHUNK_LEN))
+                .map(|((((c, h), g), f), d)| {
                     let mut sums = ContactEnergySums::default();
-                    for (((c, h), g), f) in c.iter().zip(h).zip(g).zip(f) {
-                        evaluate(c, h, g, f, &mut sums);
+                    for ((((c, h), g), f), d) in c.iter().zip(h).zip(g).zip(f).zip(d) {
+                        evaluate(c, h, g, f, d, &mut sums);
                     }
                     sums
                 }),
@@ -175,6 +181,8 @@ struct Bodies {
     omega_b: DVec3,
     /// Velocity of the wall (zero for a grain pair).
     wall_velocity: DVec3,
+    /// Where the bodies sit in the snapshot.
+    indices: ContactBodies,
 }
 
 #[inline]
@@ -192,19 +200,28 @@ fn bodies(snapshot: &GrainSnapshot, c: &Contact) -> Bodies {
                 omega_a: snapshot.omega[i],
                 omega_b: snapshot.omega[j],
                 wall_velocity: DVec3::ZERO,
+                indices: ContactBodies {
+                    a: i as u32,
+                    b: j as u32,
+                },
             }
         }
         ContactKind::GrainWall => {
-            let w = snapshot
+            let k = snapshot
                 .walls
                 .iter()
-                .find(|w| w.entity == c.b)
+                .position(|w| w.entity == c.b)
                 .expect("a contact's wall is in the snapshot");
+            let w = &snapshot.walls[k];
             Bodies {
                 kin: ContactKinematics::grain_wall(snapshot, i, w),
                 omega_a: snapshot.omega[i],
                 omega_b: DVec3::ZERO,
                 wall_velocity: w.velocity,
+                indices: ContactBodies {
+                    a: i as u32,
+                    b: WALL_BODY_BASE + k as u32,
+                },
             }
         }
     }
@@ -236,7 +253,7 @@ pub fn apply_contact_forces(
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
     mut partials: ResMut<ContactEnergyPartials>,
-    contacts: Query<(&Contact, &ContactForce)>,
+    contacts: Query<(&ContactBodies, &ContactForce)>,
     mut grains: Query<(Entity, &mut Force, &mut Torque), With<Grain>>,
     mut walls: Query<(Entity, &mut WallLoad)>,
     mut acc: Local<ForceAccumulators>,
@@ -251,20 +268,43 @@ pub fn apply_contact_forces(
     if ledger.dissipated.len() < channels.names.len() {
         ledger.dissipated.resize(channels.names.len(), 0.0);
     }
-    // The serial part is only the scatter of forces and torques; counts, the worst
-    // overlap and the energies come summed per chunk from the parallel force loop.
-    for (c, f) in &contacts {
-        let i = snapshot.dense(c.a).expect("contact grain in snapshot");
-        acc.force[i] += f.force;
-        acc.torque[i] += f.torque_a;
-        match c.kind {
-            ContactKind::GrainGrain => {
-                let j = snapshot.dense(c.b).expect("contact grain in snapshot");
-                acc.force[j] -= f.force;
-                acc.torque[j] += f.torque_b;
+    // Each grain sums its contacts' forces in table order, whichever thread does it, so
+    // the totals are the same bit for bit on any number of threads: the grains are split
+    // into one range per thread, and each range's thread reads every contact's body
+    // indices (written by the force loop) and adds the forces of those that touch it.
+    // Counts, the worst overlap and the energies come summed per chunk from the force loop.
+    let tables: Vec<(&[ContactBodies], &[ContactForce])> = contacts
+        .contiguous_iter()
+        .expect("contact query is dense")
+        .collect();
+    let range = n.div_ceil(rayon::current_num_threads()).max(1);
+    let acc = &mut *acc;
+    acc.force
+        .par_chunks_mut(range)
+        .zip(acc.torque.par_chunks_mut(range))
+        .enumerate()
+        .for_each(|(r, (force, torque))| {
+            let first = r * range;
+            let end = first + force.len();
+            for &(bodies, forces) in &tables {
+                for (b, f) in bodies.iter().zip(forces) {
+                    let i = b.a as usize;
+                    if i >= first && i < end {
+                        force[i - first] += f.force;
+                        torque[i - first] += f.torque_a;
+                    }
+                    let j = b.b as usize;
+                    if j >= first && j < end {
+                        force[j - first] -= f.force;
+                        torque[j - first] += f.torque_b;
+                    }
+                }
             }
-            ContactKind::GrainWall => {
-                if let Some(w) = snapshot.walls.iter().position(|w| w.entity == c.b) {
+        });
+    if !acc.wall_force.is_empty() {
+        for &(bodies, forces) in &tables {
+            for (b, f) in bodies.iter().zip(forces) {
+                if let Some(w) = b.wall_b() {
                     acc.wall_force[w] -= f.force;
                 }
             }
