@@ -67,8 +67,9 @@ impl NeighbourList {
         }
         let limit = half * half;
         s.position
-            .iter()
-            .zip(&self.reference)
+            .par_iter()
+            .with_min_len(4096)
+            .zip(self.reference.par_iter())
             .any(|(p, q)| s.separation(*p, *q).length_squared() > limit)
     }
 }

@@ -351,10 +351,15 @@ pub fn apply_contact_forces(
         let f = f.bypass_change_detection();
         let t = t.bypass_change_detection();
         debug_assert_eq!(&snapshot.entity[k..k + e.len()], e);
-        for m in 0..e.len() {
-            f[m].0 = acc.force[k + m];
-            t[m].0 = acc.torque[k + m];
-        }
+        let (force, torque) = (&acc.force[k..k + e.len()], &acc.torque[k..k + e.len()]);
+        f.par_iter_mut()
+            .zip(t.par_iter_mut())
+            .zip(force.par_iter().zip(torque.par_iter()))
+            .with_min_len(4096)
+            .for_each(|((f, t), (force, torque))| {
+                f.0 = *force;
+                t.0 = *torque;
+            });
         k += e.len();
     }
     for (entity, mut load) in &mut walls {

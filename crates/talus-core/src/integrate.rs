@@ -255,20 +255,34 @@ pub fn kinetic_energy(
     };
     // Without rotation the torques are computed but never integrated.
     let rotation = config.rotation;
-    let mut translational = 0.0;
-    let mut rotational = 0.0;
-    let mut staggering = 0.0;
+    // Summed per fixed chunk of grains, the chunks in order: the same sums on any number
+    // of threads.
+    let mut partial: Vec<[f64; 3]> = Vec::new();
     for (v, w, m, i, f, t) in grains.contiguous_iter().expect("grain query is dense") {
-        for k in 0..v.len() {
-            translational += 0.5 * m[k].0 * v[k].0.length_squared();
-            rotational += 0.5 * i[k].0 * w[k].0.length_squared();
-            staggering +=
-                linear * v[k].0.dot(f[k].0) - quadratic * f[k].0.length_squared() / m[k].0;
-            if rotation {
-                staggering +=
-                    linear * w[k].0.dot(t[k].0) - quadratic * t[k].0.length_squared() / i[k].0;
-            }
-        }
+        partial.par_extend(
+            (0..v.len().div_ceil(REDUCTION_CHUNK))
+                .into_par_iter()
+                .map(|chunk| {
+                    let mut sums = [0.0; 3];
+                    for k in chunk * REDUCTION_CHUNK..((chunk + 1) * REDUCTION_CHUNK).min(v.len()) {
+                        sums[0] += 0.5 * m[k].0 * v[k].0.length_squared();
+                        sums[1] += 0.5 * i[k].0 * w[k].0.length_squared();
+                        sums[2] += linear * v[k].0.dot(f[k].0)
+                            - quadratic * f[k].0.length_squared() / m[k].0;
+                        if rotation {
+                            sums[2] += linear * w[k].0.dot(t[k].0)
+                                - quadratic * t[k].0.length_squared() / i[k].0;
+                        }
+                    }
+                    sums
+                }),
+        );
+    }
+    let [mut translational, mut rotational, mut staggering] = [0.0; 3];
+    for [t, r, s] in partial {
+        translational += t;
+        rotational += r;
+        staggering += s;
     }
     energy.translational_kinetic = translational;
     energy.rotational_kinetic = rotational;

@@ -6,6 +6,7 @@
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
+use rayon::prelude::*;
 
 use crate::components::{Frozen, Grain, Position, Velocity};
 use crate::resources::Clock;
@@ -166,9 +167,10 @@ impl PeriodicBox {
 pub fn wrap_positions(periodic: Res<PeriodicBox>, mut grains: Query<&mut Position, With<Grain>>) {
     let b = *periodic;
     for mut p in grains.contiguous_iter_mut().expect("grain query is dense") {
-        for p in p.bypass_change_detection().iter_mut() {
-            p.0 = b.wrap(p.0);
-        }
+        p.bypass_change_detection()
+            .par_iter_mut()
+            .with_min_len(4096)
+            .for_each(|p| p.0 = b.wrap(p.0));
     }
 }
 

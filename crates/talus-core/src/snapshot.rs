@@ -7,6 +7,7 @@
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
+use rayon::prelude::*;
 
 use crate::components::*;
 
@@ -99,6 +100,17 @@ impl GrainSnapshot {
     }
 }
 
+/// Grains per parallel work unit of the snapshot's copies.
+const COPY_CHUNK: usize = 4096;
+
+/// Copies one component's values into a snapshot array, in parallel chunks.
+fn copy_vectors<T: Sync>(dst: &mut [DVec3], src: &[T], value: fn(&T) -> DVec3) {
+    dst.par_iter_mut()
+        .with_min_len(COPY_CHUNK)
+        .zip(src.par_iter())
+        .for_each(|(d, x)| *d = value(x));
+}
+
 /// Copies grain and wall state into the snapshot, reusing its allocations.
 #[allow(clippy::type_complexity)]
 pub fn gather_snapshot(
@@ -121,22 +133,49 @@ pub fn gather_snapshot(
 ) {
     let s = &mut *snapshot;
     s.periodic = periodic.map(|p| *p);
-    s.entity.clear();
-    s.position.clear();
-    s.velocity.clear();
-    s.omega.clear();
-    s.radius.clear();
-    s.mass.clear();
-    s.material.clear();
+    let n: usize = grains
+        .contiguous_iter()
+        .expect("grain query is dense")
+        .map(|(e, ..)| e.len())
+        .sum();
+    s.entity.resize(n, Entity::PLACEHOLDER);
+    s.position.resize(n, DVec3::ZERO);
+    s.velocity.resize(n, DVec3::ZERO);
+    s.omega.resize(n, DVec3::ZERO);
+    s.radius.resize(n, 0.0);
+    s.mass.resize(n, 0.0);
+    s.material.resize(n, 0);
     s.max_radius = 0.0;
+    // Each table's slice of every array is filled in parallel (plain copies: the result
+    // does not depend on the thread count).
+    let mut k = 0;
     for (e, p, v, w, r, m, mat) in grains.contiguous_iter().expect("grain query is dense") {
-        s.entity.extend_from_slice(e);
-        s.position.extend(p.iter().map(|x| x.0));
-        s.velocity.extend(v.iter().map(|x| x.0));
-        s.omega.extend(w.iter().map(|x| x.0));
-        s.radius.extend(r.iter().map(|x| x.0));
-        s.mass.extend(m.iter().map(|x| x.0));
-        s.material.extend(mat.iter().map(|x| x.0));
+        let range = k..k + e.len();
+        k += e.len();
+        s.entity[range.clone()].copy_from_slice(e);
+        let (position, velocity, omega) = (
+            &mut s.position[range.clone()],
+            &mut s.velocity[range.clone()],
+            &mut s.omega[range.clone()],
+        );
+        rayon::join(
+            || copy_vectors(position, p, |x| x.0),
+            || {
+                rayon::join(
+                    || copy_vectors(velocity, v, |x| x.0),
+                    || copy_vectors(omega, w, |x| x.0),
+                )
+            },
+        );
+        for (d, x) in s.radius[range.clone()].iter_mut().zip(r) {
+            *d = x.0;
+        }
+        for (d, x) in s.mass[range.clone()].iter_mut().zip(m) {
+            *d = x.0;
+        }
+        for (d, x) in s.material[range].iter_mut().zip(mat) {
+            *d = x.0;
+        }
     }
     s.max_radius = s.radius.iter().copied().fold(0.0, f64::max);
     let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
