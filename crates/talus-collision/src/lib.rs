@@ -42,11 +42,6 @@ impl Plugin for CollisionPlugin {
         );
         sim.add_system(
             Stage::NarrowPhase,
-            "find_touching_pairs",
-            narrow::find_touching_pairs,
-        );
-        sim.add_system(
-            Stage::NarrowPhase,
             "update_contact_entities",
             narrow::update_contacts,
         );

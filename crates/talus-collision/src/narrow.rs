@@ -1,6 +1,6 @@
-//! The narrow phase: exact overlap tests on the grid's neighbour stencil, and the
-//! life cycle of contact entities (created when a pair starts touching, kept while it
-//! touches, removed when it separates).
+//! The narrow phase: exact overlap tests on the neighbour list's candidate pairs, and
+//! the life cycle of contact entities (created when a pair starts touching, kept while
+//! it touches, removed when it separates).
 
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
@@ -13,41 +13,42 @@ use talus_core::snapshot::GrainSnapshot;
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, NeighbourList};
 
-/// Body codes above this in a found pair are walls: `u32::MAX - wall index`.
+/// Body codes at or above this are walls: `u32::MAX - wall index`; below, a grain's dense
+/// index.
 const WALL_CODES: u32 = u32::MAX - 1024;
 
 /// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]
 struct IndexEntry {
-    partner: Entity,
-    contact: Entity,
+    /// The second body: its dense index, or `u32::MAX - wall index`.
+    partner: u32,
     /// The pass that last found the pair. An entry is dropped the pass after it was not
     /// found, so only the current and the previous pass are ever compared: a wrapping u32
     /// is exact.
     seen: u32,
+    contact: Entity,
 }
 
 /// Live contacts of each grain, by the grain's dense index in the snapshot: finding
-/// whether a pair already has a contact is a scan of a handful of entries, no hashing,
-/// and each chunk of grains owns its slice of the index, so the narrow phase's
-/// bookkeeping runs in parallel over the same chunks as the overlap tests. Each contact
-/// is entered under its first body only, so a grain holds about half its coordination
-/// number; four entries fit inline (20 bytes each), more spill to the heap. When the
-/// snapshot's grain order changes (grains added or removed, a component set changed) the
-/// index is re-keyed by entity before the next pass.
+/// whether a pair already has a contact is a scan of a handful of entries, no hashing and
+/// no entity look-up, and each chunk of grains owns its slice of the index, so the narrow
+/// phase runs in parallel over the same chunks as the neighbour list. Each contact is
+/// entered under its first body only, so a grain holds about half its coordination
+/// number; four entries fit inline (16 bytes each), more spill to the heap. When the
+/// snapshot's order of grains or walls changes (grains added or removed, a component set
+/// changed) the index is re-keyed by entity before the next pass.
 #[derive(Resource, Default)]
 pub struct ContactIndex {
     /// Live contacts of each grain, by dense index in the order of `entities`.
     per_grain: Vec<SmallVec<[IndexEntry; 4]>>,
-    /// The grain entities in the dense order `per_grain` is keyed by.
+    /// The grain entities in the dense order the index is keyed by.
     entities: Vec<Entity>,
-    /// Contacts restored from a saved state before the snapshot knew their grains'
-    /// dense indices: (first body, second body, contact), entered at the next pass.
+    /// The wall entities in the order the partner codes use.
+    walls: Vec<Entity>,
+    /// Contacts restored from a saved state before the snapshot knew their bodies' dense
+    /// indices: (first body, second body, contact), entered at the next pass.
     pending: Vec<(Entity, Entity, Entity)>,
     pass: u32,
-    /// Pairs found touching this pass, per chunk of grains (dense indices; walls are
-    /// encoded as `u32::MAX - wall index`).
-    found: Vec<Vec<(u32, u32)>>,
     /// Per chunk of grains: the touching pairs that have no contact yet (scratch).
     new_pairs: Vec<Vec<(u32, u32)>>,
     /// Per chunk of grains: the contacts that ended this pass (scratch).
@@ -69,117 +70,106 @@ impl ContactIndex {
     /// the grain list: for inspection, not for hot loops.
     pub fn contact_between(&self, a: Entity, b: Entity) -> Option<Entity> {
         let find = |first: Entity, second: Entity| {
-            let pending = self
+            if let Some(&(_, _, c)) = self
                 .pending
                 .iter()
                 .find(|&&(x, y, _)| x == first && y == second)
-                .map(|&(_, _, c)| c);
+            {
+                return Some(c);
+            }
             let k = self.entities.iter().position(|&e| e == first)?;
+            let code = self.code_of(second)?;
             self.per_grain[k]
                 .iter()
-                .find(|e| e.partner == second)
+                .find(|e| e.partner == code)
                 .map(|e| e.contact)
-                .or(pending)
         };
         find(a, b).or_else(|| find(b, a))
     }
 
     /// Enters an existing contact entity between grain `a` (the contact's first body) and
-    /// body `b`: for contacts restored from a saved state. It is keyed by its grain's
-    /// dense index at the next narrow phase.
+    /// body `b`: for contacts restored from a saved state. It is keyed by its bodies'
+    /// dense indices at the next narrow phase.
     pub fn register(&mut self, a: Entity, b: Entity, contact: Entity) {
         self.pending.push((a, b, contact));
     }
 
-    /// Keys the index by the snapshot's dense order (re-keying it by entity if the order
-    /// changed) and enters the pending contacts. Adds to `orphans` the contacts whose first
-    /// grain is no longer in the snapshot.
+    /// The partner code of a body in the order the index is keyed by.
+    fn code_of(&self, body: Entity) -> Option<u32> {
+        self.entities
+            .iter()
+            .position(|&e| e == body)
+            .map(|k| k as u32)
+            .or_else(|| {
+                let w = self.walls.iter().position(|&w| w == body)?;
+                Some(u32::MAX - w as u32)
+            })
+    }
+
+    /// Keys the index by the snapshot's order of grains and walls (re-keying it by entity
+    /// if the order changed) and enters the pending contacts. Adds to `orphans` the
+    /// contacts one of whose bodies is no longer in the snapshot.
     fn key_by(&mut self, s: &GrainSnapshot, orphans: &mut Vec<Entity>) {
-        if self.entities != s.entity {
-            let mut old = std::mem::take(&mut self.per_grain);
-            self.per_grain.resize_with(s.len(), SmallVec::new);
-            for (k, &e) in self.entities.iter().enumerate() {
-                match s.dense(e) {
-                    Some(d) => self.per_grain[d] = std::mem::take(&mut old[k]),
-                    None => orphans.extend(old[k].iter().map(|entry| entry.contact)),
+        let walls_changed = self.walls.len() != s.walls.len()
+            || self.walls.iter().zip(&s.walls).any(|(a, b)| *a != b.entity);
+        if walls_changed || self.entities != s.entity {
+            let new_code = |code: u32| -> Option<u32> {
+                if code >= WALL_CODES {
+                    let wall = self.walls[(u32::MAX - code) as usize];
+                    let w = s.walls.iter().position(|x| x.entity == wall)?;
+                    Some(u32::MAX - w as u32)
+                } else {
+                    s.dense(self.entities[code as usize]).map(|d| d as u32)
+                }
+            };
+            let mut rekeyed: Vec<SmallVec<[IndexEntry; 4]>> = Vec::new();
+            rekeyed.resize_with(s.len(), SmallVec::new);
+            for (k, entries) in self.per_grain.iter().enumerate() {
+                for entry in entries {
+                    let key = s.dense(self.entities[k]);
+                    match (key, new_code(entry.partner)) {
+                        (Some(d), Some(partner)) => {
+                            rekeyed[d].push(IndexEntry { partner, ..*entry })
+                        }
+                        _ => orphans.push(entry.contact),
+                    }
                 }
             }
+            self.per_grain = rekeyed;
             self.entities.clone_from(&s.entity);
+            self.walls.clear();
+            self.walls.extend(s.walls.iter().map(|w| w.entity));
         }
         // A restored contact counts as found at the previous pass, like a live one.
         let seen = self.pass;
-        for (a, b, contact) in self.pending.drain(..) {
-            match s.dense(a) {
-                Some(d) => self.per_grain[d].push(IndexEntry {
-                    partner: b,
-                    contact,
+        for (a, b, contact) in std::mem::take(&mut self.pending) {
+            let partner = s.dense(b).map(|d| d as u32).or_else(|| {
+                let w = s.wall_index(b)?;
+                Some(u32::MAX - w as u32)
+            });
+            match (s.dense(a), partner) {
+                (Some(d), Some(partner)) => self.per_grain[d].push(IndexEntry {
+                    partner,
                     seen,
+                    contact,
                 }),
-                None => orphans.push(contact),
+                _ => orphans.push(contact),
             }
         }
     }
 }
 
-/// Finds all touching grain–grain and grain–wall pairs among the neighbour list's
-/// candidates, in parallel over fixed chunks.
-pub fn find_touching_pairs(
-    snapshot: Res<GrainSnapshot>,
-    grid: Res<CellGrid>,
-    list: Res<NeighbourList>,
-    mut index: ResMut<ContactIndex>,
-) {
-    let s = &*snapshot;
-    let n = s.len();
-    let chunks = n.div_ceil(CHUNK);
-    let range = grid.interaction_range;
-    if index.found.len() < chunks {
-        index.found.resize_with(chunks, Vec::new);
-    }
-    index.found[..chunks]
-        .par_iter_mut()
-        .zip(list.chunks[..chunks].par_iter())
-        .enumerate()
-        .for_each(|(chunk, (out, candidates))| {
-            out.clear();
-            let mut cursor = 0;
-            for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
-                let p = s.position[i];
-                let r = s.radius[i];
-                // A frozen grain has an infinite mass in the snapshot. A contact between
-                // two frozen grains, or a frozen grain and a wall, moves nothing, and its
-                // reduced mass (hence a mass-scaled dashpot) would be infinite: none is made.
-                let frozen = s.mass[i].is_infinite();
-                while cursor < candidates.len() && candidates[cursor].0 as usize == i {
-                    let j = candidates[cursor].1;
-                    cursor += 1;
-                    if frozen && s.mass[j as usize].is_infinite() {
-                        continue;
-                    }
-                    let reach = r + s.radius[j as usize] + range;
-                    if s.separation(p, s.position[j as usize]).length_squared() < reach * reach {
-                        out.push((i as u32, j));
-                    }
-                }
-                if frozen {
-                    continue;
-                }
-                for (w, wall) in s.walls.iter().enumerate() {
-                    if (p - wall.point).dot(wall.normal) < r + range {
-                        out.push((i as u32, u32::MAX - w as u32));
-                    }
-                }
-            }
-        });
-}
-
-/// Creates contact entities for new pairs (with the law of their material pair) and
-/// removes those whose pair no longer touches.
+/// The narrow phase: tests the neighbour list's candidate pairs (and each grain against
+/// each wall) for touch, creates contact entities for new touching pairs (with the law
+/// of their material pair) and removes those whose pair no longer touches.
 pub fn update_contacts(world: &mut World) {
     world.resource_scope(|world, mut index: Mut<ContactIndex>| {
         world.resource_scope(|world, table: Mut<ContactLawTable>| {
             world.resource_scope(|world, snapshot: Mut<GrainSnapshot>| {
-                update_contacts_inner(world, &mut index, &table, &snapshot);
+                world.resource_scope(|world, list: Mut<NeighbourList>| {
+                    let range = world.resource::<CellGrid>().interaction_range;
+                    update_contacts_inner(world, &mut index, &table, &snapshot, &list, range);
+                });
             });
         });
     });
@@ -190,15 +180,17 @@ fn update_contacts_inner(
     index: &mut ContactIndex,
     table: &ContactLawTable,
     s: &GrainSnapshot,
+    list: &NeighbourList,
+    range: f64,
 ) {
     let mut orphans = Vec::new();
     index.key_by(s, &mut orphans);
     index.pass = index.pass.wrapping_add(1);
     let pass = index.pass;
-    let chunks = s.len().div_ceil(CHUNK);
+    let n = s.len();
+    let chunks = n.div_ceil(CHUNK);
     let ContactIndex {
         per_grain,
-        found,
         new_pairs,
         ended,
         ..
@@ -209,32 +201,55 @@ fn update_contacts_inner(
     if ended.len() < chunks {
         ended.resize_with(chunks, Vec::new);
     }
-    if found.len() < chunks {
-        found.resize_with(chunks, Vec::new);
-    }
-    // Each chunk of grains owns its slice of the index: marking the pairs found again,
-    // listing the new ones and dropping the ended ones run in parallel; only spawning and
-    // despawning entities, which change the world's tables, are serial.
+    // Each chunk of grains owns its slice of the index: the overlap tests, marking the
+    // pairs found again, listing the new ones and dropping the ended ones run in
+    // parallel; only spawning and despawning entities, which change the world's tables,
+    // are serial.
     let view: &World = world;
     per_grain
         .par_chunks_mut(CHUNK)
-        .zip(found[..chunks].par_iter())
+        .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
         .zip(ended[..chunks].par_iter_mut())
         .enumerate()
-        .for_each(|(chunk, (((entries, pairs), new), gone))| {
+        .for_each(|(chunk, (((entries, candidates), new), gone))| {
             let base = chunk * CHUNK;
             new.clear();
             gone.clear();
-            for &(i, j) in pairs {
-                let (b, mat_b) = body(s, j);
-                if let Some(entry) = entries[i as usize - base]
-                    .iter_mut()
-                    .find(|e| e.partner == b)
-                {
+            let mut touching = |i: usize, partner: u32, material_b: u16| {
+                let list = &mut entries[i - base];
+                if let Some(entry) = list.iter_mut().find(|e| e.partner == partner) {
                     entry.seen = pass;
-                } else if table.get(s.material[i as usize], mat_b).is_some() {
-                    new.push((i, j));
+                } else if table.get(s.material[i], material_b).is_some() {
+                    new.push((i as u32, partner));
+                }
+            };
+            let mut cursor = 0;
+            for i in base..(base + CHUNK).min(n) {
+                let p = s.position[i];
+                let r = s.radius[i];
+                // A frozen grain has an infinite mass in the snapshot. A contact between
+                // two frozen grains, or a frozen grain and a wall, moves nothing, and its
+                // reduced mass (hence a mass-scaled dashpot) would be infinite: none is made.
+                let frozen = s.mass[i].is_infinite();
+                while cursor < candidates.len() && candidates[cursor].0 as usize == i {
+                    let j = candidates[cursor].1 as usize;
+                    cursor += 1;
+                    if frozen && s.mass[j].is_infinite() {
+                        continue;
+                    }
+                    let reach = r + s.radius[j] + range;
+                    if s.separation(p, s.position[j]).length_squared() < reach * reach {
+                        touching(i, j as u32, s.material[j]);
+                    }
+                }
+                if frozen {
+                    continue;
+                }
+                for (w, wall) in s.walls.iter().enumerate() {
+                    if (p - wall.point).dot(wall.normal) < r + range {
+                        touching(i, u32::MAX - w as u32, wall.material);
+                    }
                 }
             }
             for list in entries.iter_mut() {
@@ -257,33 +272,36 @@ fn update_contacts_inner(
             }
         });
     // New contacts are spawned in the order the pairs were found (chunk by chunk, grain
-    // by grain, partner by partner): a fixed function of the state.
+    // by grain, partner by partner, walls last): a fixed function of the state.
     for &(i, j) in new_pairs[..chunks].iter().flatten() {
-        let (b, mat_b) = body(s, j);
-        let kind = if j > WALL_CODES {
-            ContactKind::GrainWall
+        let (b, material_b, kind) = if j >= WALL_CODES {
+            let wall = &s.walls[(u32::MAX - j) as usize];
+            (wall.entity, wall.material, ContactKind::GrainWall)
         } else {
-            ContactKind::GrainGrain
+            (
+                s.entity[j as usize],
+                s.material[j as usize],
+                ContactKind::GrainGrain,
+            )
         };
         let slot = table
-            .get(s.material[i as usize], mat_b)
+            .get(s.material[i as usize], material_b)
             .expect("the parallel pass kept only interacting pairs");
         // The grain first in dense order is `a` (never the entity ids, which depend on
         // the history of spawns: a restored run must choose alike).
-        let a = s.entity[i as usize];
         let contact = (slot.spawn)(
             world,
             Contact {
-                a,
+                a: s.entity[i as usize],
                 b,
                 kind,
                 pair_slot: slot.pair_slot,
             },
         );
         per_grain[i as usize].push(IndexEntry {
-            partner: b,
-            contact,
+            partner: j,
             seen: pass,
+            contact,
         });
     }
     // Despawning moves the last contact of the table into the freed row, so the order of
@@ -296,16 +314,5 @@ fn update_contacts_inner(
         .sort_unstable_by_key(|&c| std::cmp::Reverse(world.entity(c).location().table_row.index()));
     for &c in orphans.iter() {
         world.despawn(c);
-    }
-}
-
-/// The entity and material of a found pair's second body (grain index or wall code).
-#[inline]
-fn body(s: &GrainSnapshot, j: u32) -> (Entity, u16) {
-    if j > WALL_CODES {
-        let wall = &s.walls[(u32::MAX - j) as usize];
-        (wall.entity, wall.material)
-    } else {
-        (s.entity[j as usize], s.material[j as usize])
     }
 }
