@@ -36,6 +36,10 @@ pub struct ContactBodies {
     /// Dense index of grain `b`, or [`WALL_BODY_BASE`] plus the wall's index in the
     /// snapshot's walls for a grain–wall contact.
     pub b: u32,
+    /// The snapshot's [`layout`](talus_core::snapshot::GrainSnapshot::layout) the indices
+    /// belong to (0: none yet): while it is unchanged the force loop reuses them instead of
+    /// looking the entities up.
+    pub layout: u32,
 }
 
 /// [`ContactBodies::b`] at or above this is a wall: `b - WALL_BODY_BASE` is its index.

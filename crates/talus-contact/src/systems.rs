@@ -113,7 +113,7 @@ pub fn evaluate_law<L: ContactLaw>(
             omega_b,
             wall_velocity,
             indices: dense,
-        } = bodies(snapshot, c);
+        } = bodies(snapshot, c, *indices);
         *indices = dense;
         let branch_shift = kin.set_displacement(g.normal, g.overlap, omega_a, omega_b, dt);
         let old_force = f.force;
@@ -185,16 +185,29 @@ struct Bodies {
     indices: ContactBodies,
 }
 
+/// `cached` are the contact's indices of its last evaluation, reused if the snapshot's
+/// layout has not changed since.
 #[inline]
-fn bodies(snapshot: &GrainSnapshot, c: &Contact) -> Bodies {
-    let i = snapshot
-        .dense(c.a)
-        .expect("a contact's grain is in the snapshot");
+fn bodies(snapshot: &GrainSnapshot, c: &Contact, cached: ContactBodies) -> Bodies {
+    let valid = cached.layout == snapshot.layout;
+    let i = if valid {
+        cached.a as usize
+    } else {
+        snapshot
+            .dense(c.a)
+            .expect("a contact's grain is in the snapshot")
+    };
+    debug_assert_eq!(snapshot.entity[i], c.a);
     match c.kind {
         ContactKind::GrainGrain => {
-            let j = snapshot
-                .dense(c.b)
-                .expect("a contact's grain is in the snapshot");
+            let j = if valid {
+                cached.b as usize
+            } else {
+                snapshot
+                    .dense(c.b)
+                    .expect("a contact's grain is in the snapshot")
+            };
+            debug_assert_eq!(snapshot.entity[j], c.b);
             Bodies {
                 kin: ContactKinematics::grain_grain(snapshot, i, j),
                 omega_a: snapshot.omega[i],
@@ -203,15 +216,19 @@ fn bodies(snapshot: &GrainSnapshot, c: &Contact) -> Bodies {
                 indices: ContactBodies {
                     a: i as u32,
                     b: j as u32,
+                    layout: snapshot.layout,
                 },
             }
         }
         ContactKind::GrainWall => {
-            let k = snapshot
-                .walls
-                .iter()
-                .position(|w| w.entity == c.b)
-                .expect("a contact's wall is in the snapshot");
+            let k = match cached.wall_b() {
+                Some(k) if valid => k,
+                _ => snapshot
+                    .walls
+                    .iter()
+                    .position(|w| w.entity == c.b)
+                    .expect("a contact's wall is in the snapshot"),
+            };
             let w = &snapshot.walls[k];
             Bodies {
                 kin: ContactKinematics::grain_wall(snapshot, i, w),
@@ -221,6 +238,7 @@ fn bodies(snapshot: &GrainSnapshot, c: &Contact) -> Bodies {
                 indices: ContactBodies {
                     a: i as u32,
                     b: WALL_BODY_BASE + k as u32,
+                    layout: snapshot.layout,
                 },
             }
         }
@@ -230,7 +248,7 @@ fn bodies(snapshot: &GrainSnapshot, c: &Contact) -> Bodies {
 /// Kinematics of a contact from the snapshot.
 #[inline]
 pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
-    bodies(snapshot, c).kin
+    bodies(snapshot, c, ContactBodies::default()).kin
 }
 
 /// Scratch arrays of [`apply_contact_forces`], kept between steps to avoid allocation.

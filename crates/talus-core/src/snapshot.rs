@@ -52,6 +52,10 @@ pub struct GrainSnapshot {
     pub walls: Vec<WallState>,
     /// Largest grain radius.
     pub max_radius: f64,
+    /// Identifies the dense order of grains and the list of walls: it changes (never to 0)
+    /// whenever either changes, so dense indices taken at an earlier step stay valid while
+    /// it is the same.
+    pub layout: u32,
     /// The periodic box, when the scene has one: pair separations take its nearest image.
     pub periodic: Option<crate::periodic::PeriodicBox>,
 }
@@ -138,6 +142,7 @@ pub fn gather_snapshot(
         .expect("grain query is dense")
         .map(|(e, ..)| e.len())
         .sum();
+    let mut reordered = s.entity.len() != n;
     s.entity.resize(n, Entity::PLACEHOLDER);
     s.position.resize(n, DVec3::ZERO);
     s.velocity.resize(n, DVec3::ZERO);
@@ -152,6 +157,9 @@ pub fn gather_snapshot(
     for (e, p, v, w, r, m, mat) in grains.contiguous_iter().expect("grain query is dense") {
         let range = k..k + e.len();
         k += e.len();
+        if !reordered && s.entity[range.clone()] != *e {
+            reordered = true;
+        }
         s.entity[range.clone()].copy_from_slice(e);
         let (position, velocity, omega) = (
             &mut s.position[range.clone()],
@@ -178,12 +186,13 @@ pub fn gather_snapshot(
         }
     }
     s.max_radius = s.radius.iter().copied().fold(0.0, f64::max);
-    let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
-    if s.dense_of.len() <= max_index {
+    if reordered {
+        let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
+        s.dense_of.clear();
         s.dense_of.resize(max_index + 1, NO_INDEX);
-    }
-    for (i, e) in s.entity.iter().enumerate() {
-        s.dense_of[e.index_u32() as usize] = i as u32;
+        for (i, e) in s.entity.iter().enumerate() {
+            s.dense_of[e.index_u32() as usize] = i as u32;
+        }
     }
     // A frozen grain resists like an infinite mass: a contact's reduced mass is then the
     // moving grain's own (as LAMMPS does for frozen atoms).
@@ -192,14 +201,31 @@ pub fn gather_snapshot(
             s.mass[i] = f64::INFINITY;
         }
     }
-    s.walls.clear();
-    for (entity, wall) in &walls {
-        s.walls.push(WallState {
+    let walls_before = s.walls.len();
+    let mut walls_changed = false;
+    for (k, (entity, wall)) in walls.iter().enumerate() {
+        let state = WallState {
             entity,
             point: wall.point,
             normal: wall.normal,
             velocity: wall.velocity,
             material: wall.material.0,
-        });
+        };
+        match s.walls.get_mut(k) {
+            Some(old) => {
+                walls_changed |= old.entity != entity;
+                *old = state;
+            }
+            None => {
+                walls_changed = true;
+                s.walls.push(state);
+            }
+        }
+    }
+    let wall_count = walls.iter().len();
+    walls_changed |= wall_count != walls_before;
+    s.walls.truncate(wall_count);
+    if reordered || walls_changed {
+        s.layout = s.layout.wrapping_add(1).max(1);
     }
 }
