@@ -123,14 +123,20 @@ pub fn main_with(registry: LawRegistry) -> ExitCode {
             resume,
             save_state,
         } => {
-            if let Some(n) = threads
-                && let Err(e) = rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build_global()
+            // The run itself goes on a worker of the pool: a parallel loop started from a
+            // worker runs its first part at once on that thread, instead of waking a pool
+            // thread and putting the caller to sleep at every loop (which cost a context
+            // switch per parallel loop, several per step).
+            let pool = match rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()
             {
-                eprintln!("error: cannot start {n} threads: {e}");
-                return ExitCode::from(2);
-            }
+                Ok(pool) => pool,
+                Err(e) => {
+                    eprintln!("error: cannot start the thread pool: {e}");
+                    return ExitCode::from(2);
+                }
+            };
             let options = RunOptions {
                 out,
                 quiet,
@@ -138,7 +144,7 @@ pub fn main_with(registry: LawRegistry) -> ExitCode {
                 resume,
                 save_state,
             };
-            match run_scene(&scene, &registry, &options) {
+            match pool.install(|| run_scene(&scene, &registry, &options)) {
                 Ok(summary) => {
                     if !quiet {
                         println!("{}", summary.describe());

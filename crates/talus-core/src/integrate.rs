@@ -259,23 +259,36 @@ pub fn kinetic_energy(
     // of threads.
     let mut partial: Vec<[f64; 3]> = Vec::new();
     for (v, w, m, i, f, t) in grains.contiguous_iter().expect("grain query is dense") {
+        let sums = |((v, w), (m, i)): (
+            (&[Velocity], &[AngularVelocity]),
+            (&[Mass], &[MomentOfInertia]),
+        ),
+                    (f, t): (&[Force], &[Torque])| {
+            let mut sums = [0.0; 3];
+            for k in 0..v.len() {
+                sums[0] += 0.5 * m[k].0 * v[k].0.length_squared();
+                sums[1] += 0.5 * i[k].0 * w[k].0.length_squared();
+                sums[2] +=
+                    linear * v[k].0.dot(f[k].0) - quadratic * f[k].0.length_squared() / m[k].0;
+                if rotation {
+                    sums[2] +=
+                        linear * w[k].0.dot(t[k].0) - quadratic * t[k].0.length_squared() / i[k].0;
+                }
+            }
+            sums
+        };
         partial.par_extend(
-            (0..v.len().div_ceil(REDUCTION_CHUNK))
-                .into_par_iter()
-                .map(|chunk| {
-                    let mut sums = [0.0; 3];
-                    for k in chunk * REDUCTION_CHUNK..((chunk + 1) * REDUCTION_CHUNK).min(v.len()) {
-                        sums[0] += 0.5 * m[k].0 * v[k].0.length_squared();
-                        sums[1] += 0.5 * i[k].0 * w[k].0.length_squared();
-                        sums[2] += linear * v[k].0.dot(f[k].0)
-                            - quadratic * f[k].0.length_squared() / m[k].0;
-                        if rotation {
-                            sums[2] += linear * w[k].0.dot(t[k].0)
-                                - quadratic * t[k].0.length_squared() / i[k].0;
-                        }
-                    }
-                    sums
-                }),
+            v.par_chunks(REDUCTION_CHUNK)
+                .zip(w.par_chunks(REDUCTION_CHUNK))
+                .zip(
+                    m.par_chunks(REDUCTION_CHUNK)
+                        .zip(i.par_chunks(REDUCTION_CHUNK)),
+                )
+                .zip(
+                    f.par_chunks(REDUCTION_CHUNK)
+                        .zip(t.par_chunks(REDUCTION_CHUNK)),
+                )
+                .map(|(bodies, loads)| sums(bodies, loads)),
         );
     }
     let [mut translational, mut rotational, mut staggering] = [0.0; 3];

@@ -108,7 +108,7 @@ impl GrainSnapshot {
 const COPY_CHUNK: usize = 4096;
 
 /// Copies one component's values into a snapshot array, in parallel chunks.
-fn copy_vectors<T: Sync>(dst: &mut [DVec3], src: &[T], value: fn(&T) -> DVec3) {
+fn copy_vectors<T: Sync>(dst: &mut [DVec3], src: &[T], value: impl Fn(&T) -> DVec3 + Sync) {
     dst.par_iter_mut()
         .with_min_len(COPY_CHUNK)
         .zip(src.par_iter())
