@@ -251,18 +251,18 @@ pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
     bodies(snapshot, c, ContactBodies::default()).kin
 }
 
-/// Scratch arrays of [`apply_contact_forces`], kept between steps to avoid allocation.
+/// Scratch array of [`apply_contact_forces`], kept between steps to avoid allocation.
 #[derive(Default)]
 pub struct ForceAccumulators {
-    force: Vec<DVec3>,
-    torque: Vec<DVec3>,
     wall_force: Vec<DVec3>,
 }
 
 /// Sums contact forces and torques onto grains (overwriting last step's totals) and
 /// walls, and the contact energies the force loops summed per chunk
 /// ([`ContactEnergyPartials`], emptied here) into the ledger and the energy snapshot.
-/// Serial, in query and chunk order, so the sums are bit-reproducible.
+/// Every sum is taken in a fixed order (contacts in query order for each grain and wall,
+/// chunks in order for the energies), so the results are bit-reproducible on any number
+/// of threads; the grains' sums run in parallel over ranges of grains.
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn apply_contact_forces(
     snapshot: Res<GrainSnapshot>,
@@ -277,48 +277,53 @@ pub fn apply_contact_forces(
     mut acc: Local<ForceAccumulators>,
 ) {
     let n = snapshot.len();
-    acc.force.clear();
-    acc.force.resize(n, DVec3::ZERO);
-    acc.torque.clear();
-    acc.torque.resize(n, DVec3::ZERO);
     acc.wall_force.clear();
     acc.wall_force.resize(snapshot.walls.len(), DVec3::ZERO);
     if ledger.dissipated.len() < channels.names.len() {
         ledger.dissipated.resize(channels.names.len(), 0.0);
     }
     // Each grain sums its contacts' forces in table order, whichever thread does it, so
-    // the totals are the same bit for bit on any number of threads: the grains are split
-    // into one range per thread, and each range's thread reads every contact's body
-    // indices (written by the force loop) and adds the forces of those that touch it.
-    // Counts, the worst overlap and the energies come summed per chunk from the force loop.
+    // the totals are the same bit for bit on any number of threads: the grains' force and
+    // torque columns (in snapshot order) are split into one range per thread, and each
+    // range's thread zeroes its range, reads every contact's body indices (written by the
+    // force loop) and adds the forces of those that touch it. Counts, the worst overlap
+    // and the energies come summed per chunk from the force loop.
     let tables: Vec<(&[ContactBodies], &[ContactForce])> = contacts
         .contiguous_iter()
         .expect("contact query is dense")
         .collect();
     let range = n.div_ceil(rayon::current_num_threads()).max(1);
-    let acc = &mut *acc;
-    acc.force
-        .par_chunks_mut(range)
-        .zip(acc.torque.par_chunks_mut(range))
-        .enumerate()
-        .for_each(|(r, (force, torque))| {
-            let first = r * range;
-            let end = first + force.len();
-            for &(bodies, forces) in &tables {
-                for (b, f) in bodies.iter().zip(forces) {
-                    let i = b.a as usize;
-                    if i >= first && i < end {
-                        force[i - first] += f.force;
-                        torque[i - first] += f.torque_a;
-                    }
-                    let j = b.b as usize;
-                    if j >= first && j < end {
-                        force[j - first] -= f.force;
-                        torque[j - first] += f.torque_b;
-                    }
+    let mut parts: Vec<(usize, &mut [Force], &mut [Torque])> = Vec::new();
+    let mut offset = 0;
+    for (e, f, t) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        debug_assert_eq!(&snapshot.entity[offset..offset + e.len()], e);
+        let f = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(f).0;
+        let t = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(t).0;
+        let len = e.len();
+        for (k, (f, t)) in f.chunks_mut(range).zip(t.chunks_mut(range)).enumerate() {
+            parts.push((offset + k * range, f, t));
+        }
+        offset += len;
+    }
+    parts.into_par_iter().for_each(|(first, force, torque)| {
+        let end = first + force.len();
+        force.fill(Force(DVec3::ZERO));
+        torque.fill(Torque(DVec3::ZERO));
+        for &(bodies, forces) in &tables {
+            for (b, f) in bodies.iter().zip(forces) {
+                let i = b.a as usize;
+                if i >= first && i < end {
+                    force[i - first].0 += f.force;
+                    torque[i - first].0 += f.torque_a;
+                }
+                let j = b.b as usize;
+                if j >= first && j < end {
+                    force[j - first].0 -= f.force;
+                    torque[j - first].0 += f.torque_b;
                 }
             }
-        });
+        }
+    });
     if !acc.wall_force.is_empty() {
         for &(bodies, forces) in &tables {
             for (b, f) in bodies.iter().zip(forces) {
@@ -364,22 +369,6 @@ pub fn apply_contact_forces(
     energy.max_overlap_ratio = worst;
     energy.worst_overlap_pair = worst_pair;
 
-    let mut k = 0;
-    for (e, mut f, mut t) in grains.contiguous_iter_mut().expect("grain query is dense") {
-        let f = f.bypass_change_detection();
-        let t = t.bypass_change_detection();
-        debug_assert_eq!(&snapshot.entity[k..k + e.len()], e);
-        let (force, torque) = (&acc.force[k..k + e.len()], &acc.torque[k..k + e.len()]);
-        f.par_iter_mut()
-            .zip(t.par_iter_mut())
-            .zip(force.par_iter().zip(torque.par_iter()))
-            .with_min_len(4096)
-            .for_each(|((f, t), (force, torque))| {
-                f.0 = *force;
-                t.0 = *torque;
-            });
-        k += e.len();
-    }
     for (entity, mut load) in &mut walls {
         if let Some(w) = snapshot.walls.iter().position(|w| w.entity == entity) {
             load.0 = acc.wall_force[w];
