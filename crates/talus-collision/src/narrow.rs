@@ -17,6 +17,9 @@ use crate::neighbours::{CHUNK, NeighbourList};
 /// index.
 const WALL_CODES: u32 = u32::MAX - 1024;
 
+/// The live contacts entered under one grain.
+type GrainContacts = SmallVec<[IndexEntry; 2]>;
+
 /// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]
 struct IndexEntry {
@@ -34,13 +37,14 @@ struct IndexEntry {
 /// no entity look-up, and each chunk of grains owns its slice of the index, so the narrow
 /// phase runs in parallel over the same chunks as the neighbour list. Each contact is
 /// entered under its first body only, so a grain holds about half its coordination
-/// number; four entries fit inline (16 bytes each), more spill to the heap. When the
+/// number; two entries fit inline (16 bytes each, 40 bytes a grain: a flowing packing
+/// has about one contact per grain), more spill to the heap. When the
 /// snapshot's order of grains or walls changes (grains added or removed, a component set
 /// changed) the index is re-keyed by entity before the next pass.
 #[derive(Resource, Default)]
 pub struct ContactIndex {
     /// Live contacts of each grain, by dense index in the order of `entities`.
-    per_grain: Vec<SmallVec<[IndexEntry; 4]>>,
+    per_grain: Vec<GrainContacts>,
     /// The grain entities in the dense order the index is keyed by.
     entities: Vec<Entity>,
     /// The wall entities in the order the partner codes use.
@@ -122,7 +126,7 @@ impl ContactIndex {
                     s.dense(self.entities[code as usize]).map(|d| d as u32)
                 }
             };
-            let mut rekeyed: Vec<SmallVec<[IndexEntry; 4]>> = Vec::new();
+            let mut rekeyed: Vec<GrainContacts> = Vec::new();
             rekeyed.resize_with(s.len(), SmallVec::new);
             for (k, entries) in self.per_grain.iter().enumerate() {
                 for entry in entries {
