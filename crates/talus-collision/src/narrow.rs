@@ -130,10 +130,11 @@ impl ContactIndex {
             rekeyed.resize_with(s.len(), SmallVec::new);
             for (k, entries) in self.per_grain.iter().enumerate() {
                 for entry in entries {
-                    let key = s.dense(self.entities[k]);
+                    let key = s.dense(self.entities[k]).map(|d| d as u32);
                     match (key, new_code(entry.partner)) {
                         (Some(d), Some(partner)) => {
-                            rekeyed[d].push(IndexEntry { partner, ..*entry })
+                            let (key, partner) = first_in_order(d, partner);
+                            rekeyed[key as usize].push(IndexEntry { partner, ..*entry });
                         }
                         _ => orphans.push(entry.contact),
                     }
@@ -152,14 +153,30 @@ impl ContactIndex {
                 Some(u32::MAX - w as u32)
             });
             match (s.dense(a), partner) {
-                (Some(d), Some(partner)) => self.per_grain[d].push(IndexEntry {
-                    partner,
-                    seen,
-                    contact,
-                }),
+                (Some(d), Some(partner)) => {
+                    let (key, partner) = first_in_order(d as u32, partner);
+                    self.per_grain[key as usize].push(IndexEntry {
+                        partner,
+                        seen,
+                        contact,
+                    });
+                }
                 _ => orphans.push(contact),
             }
         }
+    }
+}
+
+/// The key and partner code under which the index holds a pair of a grain (dense index
+/// `grain`) and a body (partner code `other`): a pair of grains under the one first in
+/// dense order (the neighbour list's candidates are (i, j) with i < j, whichever body is
+/// the contact's `a`), a grain and a wall under the grain.
+#[inline]
+fn first_in_order(grain: u32, other: u32) -> (u32, u32) {
+    if other < WALL_CODES && other < grain {
+        (other, grain)
+    } else {
+        (grain, other)
     }
 }
 

@@ -1,0 +1,145 @@
+//! Contact history survives a reordering of the grains: when the grains' order in memory
+//! changes (here by moving half of them through another table and back, which is what
+//! any change of a grain's component set does), the narrow phase re-keys its contact
+//! index by entity, every persistent contact keeps its entity and its tangential spring,
+//! and the step that follows is the same, bit for bit, as without the reordering.
+
+mod common;
+
+use std::collections::BTreeMap;
+
+use bevy_ecs::prelude::*;
+use talus::contact::{Contact, LawState};
+use talus::core::components::{AngularVelocity, Grain, Position, Velocity};
+use talus::core::snapshot::GrainSnapshot;
+use talus_linear_spring::TangentialSpring;
+
+const SCENE: &str = r#"Scene(
+    name: "reorder",
+    gravity: (0.0, 0.0, -9.81),
+    steps: 30000,
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 2000.0, restitution: 0.5, friction: 0.5))],
+    walls: [Box(min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.06), material: "glass")],
+    grains: [Random(material: "glass", region: (min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.03)),
+        count: 120, radius: Uniform(min: 0.0015, max: 0.0025), seed: 9, velocity_spread: 0.05)],
+    output: (recording: false),
+)"#;
+
+/// A marker that moves a grain to another table and back.
+#[derive(Component)]
+struct Moved;
+
+/// Each contact by its pair: its entity and its tangential spring, bit for bit.
+type Springs = BTreeMap<(u64, u64), (u64, [u64; 3])>;
+
+fn springs(world: &mut World) -> Springs {
+    let mut q = world.query::<(Entity, &Contact, &LawState<TangentialSpring>)>();
+    q.iter(world)
+        .map(|(e, c, h)| {
+            (
+                (c.a.to_bits(), c.b.to_bits()),
+                (e.to_bits(), h.0.spring.to_array().map(f64::to_bits)),
+            )
+        })
+        .collect()
+}
+
+/// Grain positions, velocities and spins by entity, bit for bit.
+fn grain_bits(world: &mut World) -> BTreeMap<u64, [u64; 9]> {
+    let mut q =
+        world.query_filtered::<(Entity, &Position, &Velocity, &AngularVelocity), With<Grain>>();
+    q.iter(world)
+        .map(|(e, p, v, w)| {
+            let mut bits = [0u64; 9];
+            for (k, x) in
+                p.0.to_array()
+                    .into_iter()
+                    .chain(v.0.to_array())
+                    .chain(w.0.to_array())
+                    .enumerate()
+            {
+                bits[k] = x.to_bits();
+            }
+            (e.to_bits(), bits)
+        })
+        .collect()
+}
+
+/// Runs the scene's steps, optionally reorders the grains, then takes one more step.
+/// Returns the contacts before and after that step, the grain states after it, and the
+/// snapshot's grain order before and after it.
+fn run(
+    reorder: bool,
+) -> (
+    Springs,
+    Springs,
+    BTreeMap<u64, [u64; 9]>,
+    Vec<Entity>,
+    Vec<Entity>,
+) {
+    let (mut sim, steps) = common::build(SCENE);
+    for _ in 0..steps {
+        sim.step().unwrap();
+    }
+    let before = springs(&mut sim.world);
+    let order_before = sim.world.resource::<GrainSnapshot>().entity.clone();
+    if reorder {
+        let mut q = sim.world.query_filtered::<Entity, With<Grain>>();
+        let grains: Vec<Entity> = q.iter(&sim.world).collect();
+        for &e in grains.iter().step_by(2) {
+            sim.world.entity_mut(e).insert(Moved);
+        }
+        for &e in grains.iter().step_by(2) {
+            sim.world.entity_mut(e).remove::<Moved>();
+        }
+    }
+    sim.step().unwrap();
+    let after = springs(&mut sim.world);
+    let order_after = sim.world.resource::<GrainSnapshot>().entity.clone();
+    let grains = grain_bits(&mut sim.world);
+    (before, after, grains, order_before, order_after)
+}
+
+#[test]
+fn reordering_the_grains_keeps_every_contact_and_its_spring() {
+    let (before, after_plain, grains_plain, order, order_plain) = run(false);
+    let (before_again, after_reordered, grains_reordered, _, order_reordered) = run(true);
+    assert_eq!(before, before_again, "the runs agree up to the reordering");
+    assert_eq!(
+        order, order_plain,
+        "without reordering the grain order stays"
+    );
+    assert_ne!(
+        order, order_reordered,
+        "the reordering changed the grains' order in the snapshot"
+    );
+    let loaded = before.values().filter(|(_, s)| *s != [0; 3]).count();
+    eprintln!("{} contacts, {loaded} holding a spring", before.len());
+    assert!(loaded > 20, "enough contacts hold a spring ({loaded})");
+    // Every contact that was there before the step and is still there after it is the
+    // same entity with the same spring, reordered or not.
+    let mut persistent = 0;
+    for (pair, (entity, _)) in &before {
+        if let Some(plain) = after_plain.get(pair) {
+            persistent += 1;
+            assert_eq!(plain.0, *entity, "the contact {pair:?} persisted");
+            assert_eq!(
+                after_reordered.get(pair),
+                Some(plain),
+                "the contact {pair:?} keeps its entity and spring through the reordering"
+            );
+        }
+    }
+    assert!(persistent > 20, "enough persistent contacts ({persistent})");
+    assert_eq!(
+        after_plain.len(),
+        after_reordered.len(),
+        "the same contacts after the step"
+    );
+    assert_eq!(
+        grains_plain, grains_reordered,
+        "grain states after the step"
+    );
+}
