@@ -14,19 +14,6 @@ use talus::core::components::{AngularVelocity, Grain, Position, Velocity};
 use talus::core::snapshot::GrainSnapshot;
 use talus_linear_spring::TangentialSpring;
 
-const SCENE: &str = r#"Scene(
-    name: "reorder",
-    gravity: (0.0, 0.0, -9.81),
-    steps: 30000,
-    plugins: ["linear_spring"],
-    materials: [(name: "glass", density: 2500.0,
-        contact: (law: "linear_spring", stiffness: 2000.0, restitution: 0.5, friction: 0.5))],
-    walls: [Box(min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.06), material: "glass")],
-    grains: [Random(material: "glass", region: (min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.03)),
-        count: 120, radius: Uniform(min: 0.0015, max: 0.0025), seed: 9, velocity_spread: 0.05)],
-    output: (recording: false),
-)"#;
-
 /// A marker that moves a grain to another table and back.
 #[derive(Component)]
 struct Moved;
@@ -79,7 +66,7 @@ fn run(
     Vec<Entity>,
     Vec<Entity>,
 ) {
-    let (mut sim, steps) = common::build(SCENE);
+    let (mut sim, steps) = common::build(&common::settling_box_scene("reorder", 30000));
     for _ in 0..steps {
         sim.step().unwrap();
     }

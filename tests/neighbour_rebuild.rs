@@ -8,22 +8,9 @@ use talus::collision::NeighbourList;
 use talus::contact::{Contact, LawState};
 use talus_linear_spring::TangentialSpring;
 
-const SCENE: &str = r#"Scene(
-    name: "rebuild",
-    gravity: (0.0, 0.0, -9.81),
-    steps: 3000,
-    plugins: ["linear_spring"],
-    materials: [(name: "glass", density: 2500.0,
-        contact: (law: "linear_spring", stiffness: 2000.0, restitution: 0.5, friction: 0.5))],
-    walls: [Box(min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.06), material: "glass")],
-    grains: [Random(material: "glass", region: (min: (0.0, 0.0, 0.0), max: (0.02, 0.02, 0.03)),
-        count: 120, radius: Uniform(min: 0.0015, max: 0.0025), seed: 9, velocity_spread: 0.05)],
-    output: (recording: false),
-)"#;
-
 /// Final grain states and the tangential springs of all contacts, keyed by grain pair.
 fn run(rebuild_every_step: bool) -> (Vec<[u64; 9]>, Vec<((u64, u64), [u64; 3])>, u64) {
-    let (mut sim, steps) = common::build(SCENE);
+    let (mut sim, steps) = common::build(&common::settling_box_scene("rebuild", 3000));
     for _ in 0..steps {
         if rebuild_every_step {
             sim.world.resource_mut::<NeighbourList>().invalidate();

@@ -190,24 +190,21 @@ struct Bodies {
 #[inline]
 fn bodies(snapshot: &GrainSnapshot, c: &Contact, cached: ContactBodies) -> Bodies {
     let valid = cached.layout == snapshot.layout;
-    let i = if valid {
-        cached.a as usize
-    } else {
-        snapshot
-            .dense(c.a)
-            .expect("a contact's grain is in the snapshot")
+    let grain = |entity: Entity, cached: u32| {
+        let i = if valid {
+            cached as usize
+        } else {
+            snapshot
+                .dense(entity)
+                .expect("a contact's grain is in the snapshot")
+        };
+        debug_assert_eq!(snapshot.entity[i], entity);
+        i
     };
-    debug_assert_eq!(snapshot.entity[i], c.a);
+    let i = grain(c.a, cached.a);
     match c.kind {
         ContactKind::GrainGrain => {
-            let j = if valid {
-                cached.b as usize
-            } else {
-                snapshot
-                    .dense(c.b)
-                    .expect("a contact's grain is in the snapshot")
-            };
-            debug_assert_eq!(snapshot.entity[j], c.b);
+            let j = grain(c.b, cached.b);
             Bodies {
                 kin: ContactKinematics::grain_grain(snapshot, i, j),
                 omega_a: snapshot.omega[i],
