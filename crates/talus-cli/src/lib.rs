@@ -84,7 +84,15 @@ pub fn main_with(registry: LawRegistry) -> ExitCode {
             let out = out.unwrap_or_else(|| {
                 PathBuf::from("out").join(study.file_stem().unwrap_or_default())
             });
-            match accuracy::run_study(&study, &registry, &out) {
+            // On a pool worker, like `run` (see there).
+            let study_result = match rayon::ThreadPoolBuilder::new().build() {
+                Ok(pool) => pool.install(|| accuracy::run_study(&study, &registry, &out)),
+                Err(e) => {
+                    eprintln!("error: cannot start the thread pool: {e}");
+                    return ExitCode::from(2);
+                }
+            };
+            match study_result {
                 Ok(result) => {
                     for r in &result.rows {
                         println!(
