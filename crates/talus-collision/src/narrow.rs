@@ -6,16 +6,12 @@ use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 use smallvec::SmallVec;
 use talus_contact::{
-    Contact, ContactForce, ContactGeometry, ContactKind, systems::ContactLawTable,
+    Contact, ContactBodies, ContactForce, ContactGeometry, ContactKind, systems::ContactLawTable,
 };
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, NeighbourList};
-
-/// Body codes at or above this are walls: `u32::MAX - wall index`; below, a grain's dense
-/// index.
-const WALL_CODES: u32 = u32::MAX - 1024;
 
 /// The live contacts entered under one grain.
 type GrainContacts = SmallVec<[IndexEntry; 2]>;
@@ -23,7 +19,7 @@ type GrainContacts = SmallVec<[IndexEntry; 2]>;
 /// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]
 struct IndexEntry {
-    /// The second body: its dense index, or `u32::MAX - wall index`.
+    /// The second body: its dense index, or its wall code ([`ContactBodies::wall_code`]).
     partner: u32,
     /// The pass that last found the pair. An entry is dropped the pass after it was not
     /// found, so only the current and the previous pass are ever compared: a wrapping u32
@@ -45,6 +41,8 @@ struct IndexEntry {
 pub struct ContactIndex {
     /// Live contacts of each grain, by dense index in the order of `entities`.
     per_grain: Vec<GrainContacts>,
+    /// The snapshot layout ([`GrainSnapshot::layout`]) the index is keyed by (0: none).
+    layout: u32,
     /// The grain entities in the dense order the index is keyed by.
     entities: Vec<Entity>,
     /// The wall entities in the order the partner codes use.
@@ -106,7 +104,7 @@ impl ContactIndex {
             .map(|k| k as u32)
             .or_else(|| {
                 let w = self.walls.iter().position(|&w| w == body)?;
-                Some(u32::MAX - w as u32)
+                Some(ContactBodies::wall_code(w))
             })
     }
 
@@ -114,16 +112,11 @@ impl ContactIndex {
     /// if the order changed) and enters the pending contacts. Adds to `orphans` the
     /// contacts one of whose bodies is no longer in the snapshot.
     fn key_by(&mut self, s: &GrainSnapshot, orphans: &mut Vec<Entity>) {
-        let walls_changed = self.walls.len() != s.walls.len()
-            || self.walls.iter().zip(&s.walls).any(|(a, b)| *a != b.entity);
-        if walls_changed || self.entities != s.entity {
+        if self.layout != s.layout {
             let new_code = |code: u32| -> Option<u32> {
-                if code >= WALL_CODES {
-                    let wall = self.walls[(u32::MAX - code) as usize];
-                    let w = s.walls.iter().position(|x| x.entity == wall)?;
-                    Some(u32::MAX - w as u32)
-                } else {
-                    s.dense(self.entities[code as usize]).map(|d| d as u32)
+                match ContactBodies::wall_of(code) {
+                    Some(k) => s.wall_index(self.walls[k]).map(ContactBodies::wall_code),
+                    None => s.dense(self.entities[code as usize]).map(|d| d as u32),
                 }
             };
             let mut rekeyed: Vec<GrainContacts> = Vec::new();
@@ -144,14 +137,15 @@ impl ContactIndex {
             self.entities.clone_from(&s.entity);
             self.walls.clear();
             self.walls.extend(s.walls.iter().map(|w| w.entity));
+            self.layout = s.layout;
         }
         // A restored contact counts as found at the previous pass, like a live one.
         let seen = self.pass;
         for (a, b, contact) in std::mem::take(&mut self.pending) {
-            let partner = s.dense(b).map(|d| d as u32).or_else(|| {
-                let w = s.wall_index(b)?;
-                Some(u32::MAX - w as u32)
-            });
+            let partner = s
+                .dense(b)
+                .map(|d| d as u32)
+                .or_else(|| s.wall_index(b).map(ContactBodies::wall_code));
             match (s.dense(a), partner) {
                 (Some(d), Some(partner)) => {
                     let (key, partner) = first_in_order(d as u32, partner);
@@ -173,7 +167,7 @@ impl ContactIndex {
 /// the contact's `a`), a grain and a wall under the grain.
 #[inline]
 fn first_in_order(grain: u32, other: u32) -> (u32, u32) {
-    if other < WALL_CODES && other < grain {
+    if ContactBodies::wall_of(other).is_none() && other < grain {
         (other, grain)
     } else {
         (grain, other)
@@ -269,7 +263,7 @@ fn update_contacts_inner(
                 }
                 for (w, wall) in s.walls.iter().enumerate() {
                     if (p - wall.point).dot(wall.normal) < r + range {
-                        touching(i, u32::MAX - w as u32, wall.material);
+                        touching(i, ContactBodies::wall_code(w), wall.material);
                     }
                 }
             }
@@ -295,8 +289,8 @@ fn update_contacts_inner(
     // New contacts are spawned in the order the pairs were found (chunk by chunk, grain
     // by grain, partner by partner, walls last): a fixed function of the state.
     for &(i, j) in new_pairs[..chunks].iter().flatten() {
-        let (b, material_b, kind) = if j >= WALL_CODES {
-            let wall = &s.walls[(u32::MAX - j) as usize];
+        let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
+            let wall = &s.walls[k];
             (wall.entity, wall.material, ContactKind::GrainWall)
         } else {
             (

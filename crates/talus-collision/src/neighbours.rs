@@ -28,8 +28,8 @@ pub struct NeighbourList {
     pub chunks: Vec<Vec<(u32, u32)>>,
     /// Grain positions at the last build.
     reference: Vec<DVec3>,
-    /// Grain entities at the last build, in dense order.
-    entities: Vec<Entity>,
+    /// The snapshot layout ([`GrainSnapshot::layout`]) of the last build (0: none).
+    layout: u32,
     /// Number of builds so far.
     pub builds: u64,
     /// Lees–Edwards image offset at the last build, m (0 without shear).
@@ -40,13 +40,13 @@ impl NeighbourList {
     /// Forces a rebuild at the next broad phase (the result must not change: the list is
     /// only a superset of the touching pairs).
     pub fn invalidate(&mut self) {
-        self.entities.clear();
+        self.layout = 0;
     }
 
     /// Whether the list must be rebuilt: first use, a changed set of grains, or a grain
     /// that moved more than half the skin.
     fn stale(&self, s: &GrainSnapshot) -> bool {
-        if self.entities.len() != s.len() || self.entities != s.entity {
+        if self.layout != s.layout {
             return true;
         }
         // Across a Lees–Edwards seam a pair's separation also changes with the image
@@ -135,8 +135,7 @@ pub fn update_neighbour_list(
         });
     list.reference.clear();
     list.reference.extend_from_slice(&s.position);
-    list.entities.clear();
-    list.entities.extend_from_slice(&s.entity);
+    list.layout = s.layout;
     list.offset = s
         .periodic
         .and_then(|b| b.shear)

@@ -46,16 +46,22 @@ pub struct ContactBodies {
 pub const WALL_BODY_BASE: u32 = u32::MAX - 1024;
 
 impl ContactBodies {
-    /// The dense index of `b` if it is a grain.
+    /// The body code of the snapshot's wall `k`, as [`Self::b`] holds it.
     #[inline]
-    pub fn grain_b(&self) -> Option<usize> {
-        (self.b < WALL_BODY_BASE).then_some(self.b as usize)
+    pub fn wall_code(k: usize) -> u32 {
+        WALL_BODY_BASE + k as u32
+    }
+
+    /// The index among the snapshot's walls that a body code stands for, if it is a wall.
+    #[inline]
+    pub fn wall_of(code: u32) -> Option<usize> {
+        (code >= WALL_BODY_BASE).then(|| (code - WALL_BODY_BASE) as usize)
     }
 
     /// The index of `b` among the snapshot's walls if it is a wall.
     #[inline]
     pub fn wall_b(&self) -> Option<usize> {
-        (self.b >= WALL_BODY_BASE).then(|| (self.b - WALL_BODY_BASE) as usize)
+        Self::wall_of(self.b)
     }
 }
 

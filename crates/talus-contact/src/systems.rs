@@ -234,7 +234,7 @@ fn bodies(snapshot: &GrainSnapshot, c: &Contact, cached: ContactBodies) -> Bodie
                 wall_velocity: w.velocity,
                 indices: ContactBodies {
                     a: i as u32,
-                    b: WALL_BODY_BASE + k as u32,
+                    b: ContactBodies::wall_code(k),
                     layout: snapshot.layout,
                 },
             }
@@ -246,12 +246,6 @@ fn bodies(snapshot: &GrainSnapshot, c: &Contact, cached: ContactBodies) -> Bodie
 #[inline]
 pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
     bodies(snapshot, c, ContactBodies::default()).kin
-}
-
-/// Scratch array of [`apply_contact_forces`], kept between steps to avoid allocation.
-#[derive(Default)]
-pub struct ForceAccumulators {
-    wall_force: Vec<DVec3>,
 }
 
 /// Sums contact forces and torques onto grains (overwriting last step's totals) and
@@ -271,11 +265,11 @@ pub fn apply_contact_forces(
     contacts: Query<(&ContactBodies, &ContactForce)>,
     mut grains: Query<(Entity, &mut Force, &mut Torque), With<Grain>>,
     mut walls: Query<(Entity, &mut WallLoad)>,
-    mut acc: Local<ForceAccumulators>,
+    mut wall_force: Local<Vec<DVec3>>,
 ) {
     let n = snapshot.len();
-    acc.wall_force.clear();
-    acc.wall_force.resize(snapshot.walls.len(), DVec3::ZERO);
+    wall_force.clear();
+    wall_force.resize(snapshot.walls.len(), DVec3::ZERO);
     if ledger.dissipated.len() < channels.names.len() {
         ledger.dissipated.resize(channels.names.len(), 0.0);
     }
@@ -321,11 +315,11 @@ pub fn apply_contact_forces(
             }
         }
     });
-    if !acc.wall_force.is_empty() {
+    if !wall_force.is_empty() {
         for &(bodies, forces) in &tables {
             for (b, f) in bodies.iter().zip(forces) {
                 if let Some(w) = b.wall_b() {
-                    acc.wall_force[w] -= f.force;
+                    wall_force[w] -= f.force;
                 }
             }
         }
@@ -368,7 +362,7 @@ pub fn apply_contact_forces(
 
     for (entity, mut load) in &mut walls {
         if let Some(w) = snapshot.walls.iter().position(|w| w.entity == entity) {
-            load.0 = acc.wall_force[w];
+            load.0 = wall_force[w];
         }
     }
 }

@@ -150,7 +150,6 @@ pub fn gather_snapshot(
     s.radius.resize(n, 0.0);
     s.mass.resize(n, 0.0);
     s.material.resize(n, 0);
-    s.max_radius = 0.0;
     // Each table's slice of every array is filled in parallel (plain copies: the result
     // does not depend on the thread count).
     let mut k = 0;
@@ -201,30 +200,19 @@ pub fn gather_snapshot(
             s.mass[i] = f64::INFINITY;
         }
     }
-    let walls_before = s.walls.len();
-    let mut walls_changed = false;
-    for (k, (entity, wall)) in walls.iter().enumerate() {
-        let state = WallState {
-            entity,
-            point: wall.point,
-            normal: wall.normal,
-            velocity: wall.velocity,
-            material: wall.material.0,
-        };
-        match s.walls.get_mut(k) {
-            Some(old) => {
-                walls_changed |= old.entity != entity;
-                *old = state;
-            }
-            None => {
-                walls_changed = true;
-                s.walls.push(state);
-            }
-        }
-    }
-    let wall_count = walls.iter().len();
-    walls_changed |= wall_count != walls_before;
-    s.walls.truncate(wall_count);
+    let walls_changed = s.walls.len() != walls.iter().len()
+        || s.walls
+            .iter()
+            .zip(&walls)
+            .any(|(old, (e, _))| old.entity != e);
+    s.walls.clear();
+    s.walls.extend(walls.iter().map(|(entity, wall)| WallState {
+        entity,
+        point: wall.point,
+        normal: wall.normal,
+        velocity: wall.velocity,
+        material: wall.material.0,
+    }));
     if reordered || walls_changed {
         s.layout = s.layout.wrapping_add(1).max(1);
     }
