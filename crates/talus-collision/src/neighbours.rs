@@ -43,8 +43,8 @@ impl NeighbourList {
         self.layout = 0;
     }
 
-    /// Whether the list must be rebuilt: first use, a changed set of grains, or a grain
-    /// that moved more than half the skin.
+    /// Whether the list must be rebuilt: first use, a changed set or order of grains or
+    /// walls (the snapshot's layout), or a grain that moved more than half the skin.
     fn stale(&self, s: &GrainSnapshot) -> bool {
         if self.layout != s.layout {
             return true;
