@@ -12,7 +12,7 @@ use serde::Serialize;
 use talus_contact::LawRegistry;
 use talus_core::prelude::*;
 use talus_scene::SceneError;
-use talus_scene::state::{CompactState, SavedState};
+use talus_scene::state::{BinaryStateFile, SavedState};
 
 use crate::report::{BlowUpReport, Report, ReportSample, WallClock};
 
@@ -213,13 +213,16 @@ pub fn run_scene(
     let mut samples = Vec::new();
     let mut stopped = "completed".to_string();
     let mut blow_up = None;
-    let mut last_good = None;
+    // The last good state lives on disk, rewritten at every report, not in memory.
+    let mut last_good = BinaryStateFile::new(out_dir.join("last_good_state.bin"));
     let primed = sim.prime();
     if let Err(b) = primed {
         blow_up = Some(b);
     } else {
         samples.push(ReportSample::take(&sim.world));
-        last_good = Some(CompactState::capture(&mut sim.world, &built.name));
+        last_good
+            .write(&mut sim.world, &built.name)
+            .map_err(RunError::Output)?;
         for step in sim.step_count() + 1..=total_steps {
             if let Err(b) = sim.step() {
                 blow_up = Some(b);
@@ -237,10 +240,9 @@ pub fn run_scene(
                     .settle_kinetic_energy
                     .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
                 samples.push(sample);
-                // Drop the old copy first: two whole states at once would double the
-                // run's peak memory.
-                drop(last_good.take());
-                last_good = Some(CompactState::capture(&mut sim.world, &built.name));
+                last_good
+                    .write(&mut sim.world, &built.name)
+                    .map_err(RunError::Output)?;
                 if let Some(reason) = requested {
                     stopped = reason;
                     break;
@@ -293,11 +295,16 @@ pub fn run_scene(
     if let Some(b) = blow_up {
         report.stopped = "blow_up".into();
         let state_path = out_dir.join("last_good_state.ron");
-        let written = last_good
-            .as_ref()
-            .map(|s| s.to_saved().write(&state_path).map_err(RunError::Output))
-            .transpose()?
-            .map(|_| state_path.display().to_string());
+        let written = match last_good.step() {
+            Some(_) => {
+                last_good
+                    .read(&sim.world)
+                    .and_then(|s| s.write(&state_path))
+                    .map_err(RunError::Output)?;
+                Some(state_path.display().to_string())
+            }
+            None => None,
+        };
         let bodies: Vec<String> = b
             .entities
             .iter()
@@ -312,7 +319,7 @@ pub fn run_scene(
             } else {
                 bodies.join(", ")
             },
-            last_good.as_ref().map(|s| s.step()).unwrap_or(0),
+            last_good.step().unwrap_or(0),
             written.clone().unwrap_or_else(|| "none".into())
         ));
         report.blow_up = Some(BlowUpReport {
@@ -322,6 +329,8 @@ pub fn run_scene(
             last_good_state: written,
         });
     }
+    // Written as RON if the run blew up; a scratch file otherwise.
+    last_good.remove();
     let state_path = (blow_message.is_none() && (built.output.state || options.save_state))
         .then(|| out_dir.join("state.ron"));
     if let Some(p) = &state_path {

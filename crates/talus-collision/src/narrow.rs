@@ -39,14 +39,12 @@ struct IndexEntry {
 /// changed) the index is re-keyed by entity before the next pass.
 #[derive(Resource, Default)]
 pub struct ContactIndex {
-    /// Live contacts of each grain, by dense index in the order of `entities`.
+    /// Live contacts of each grain, by its dense index in the snapshot of `layout`.
     per_grain: Vec<GrainContacts>,
     /// The snapshot layout ([`GrainSnapshot::layout`]) the index is keyed by (0: none).
+    /// No copy of that layout's entity order is kept (8 bytes a grain): re-keying reads
+    /// each contact's bodies from its [`Contact`] component.
     layout: u32,
-    /// The grain entities in the dense order the index is keyed by.
-    entities: Vec<Entity>,
-    /// The wall entities in the order the partner codes use.
-    walls: Vec<Entity>,
     /// Contacts restored from a saved state before the snapshot knew their bodies' dense
     /// indices: (first body, second body, contact), entered at the next pass.
     pending: Vec<(Entity, Entity, Entity)>,
@@ -68,25 +66,30 @@ impl ContactIndex {
         self.len() == 0
     }
 
-    /// The contact entity of a pair, if they are in contact (in either order). A scan of
-    /// the grain list: for inspection, not for hot loops.
-    pub fn contact_between(&self, a: Entity, b: Entity) -> Option<Entity> {
-        let find = |first: Entity, second: Entity| {
-            if let Some(&(_, _, c)) = self
-                .pending
-                .iter()
-                .find(|&&(x, y, _)| x == first && y == second)
-            {
-                return Some(c);
-            }
-            let k = self.entities.iter().position(|&e| e == first)?;
-            let code = self.code_of(second)?;
-            self.per_grain[k]
-                .iter()
-                .find(|e| e.partner == code)
-                .map(|e| e.contact)
+    /// The contact entity of a pair, if they are in contact (in either order), with the
+    /// bodies' dense indices taken from `s`, the snapshot the index was last keyed by
+    /// (`None` if it was keyed by another layout). For inspection, not for hot loops.
+    pub fn contact_between(&self, s: &GrainSnapshot, a: Entity, b: Entity) -> Option<Entity> {
+        if let Some(&(_, _, c)) = self
+            .pending
+            .iter()
+            .find(|&&(x, y, _)| (x, y) == (a, b) || (x, y) == (b, a))
+        {
+            return Some(c);
+        }
+        if s.layout != self.layout {
+            return None;
+        }
+        let code = |body: Entity| {
+            s.dense(body)
+                .map(|d| d as u32)
+                .or_else(|| s.wall_index(body).map(ContactBodies::wall_code))
         };
-        find(a, b).or_else(|| find(b, a))
+        let (key, partner) = first_in_order(s.dense(a)? as u32, code(b)?);
+        self.per_grain[key as usize]
+            .iter()
+            .find(|e| e.partner == partner)
+            .map(|e| e.contact)
     }
 
     /// Enters an existing contact entity between grain `a` (the contact's first body) and
@@ -96,47 +99,32 @@ impl ContactIndex {
         self.pending.push((a, b, contact));
     }
 
-    /// The partner code of a body in the order the index is keyed by.
-    fn code_of(&self, body: Entity) -> Option<u32> {
-        self.entities
-            .iter()
-            .position(|&e| e == body)
-            .map(|k| k as u32)
-            .or_else(|| {
-                let w = self.walls.iter().position(|&w| w == body)?;
-                Some(ContactBodies::wall_code(w))
-            })
-    }
-
     /// Keys the index by the snapshot's order of grains and walls (re-keying it by entity
     /// if the order changed) and enters the pending contacts. Adds to `orphans` the
     /// contacts one of whose bodies is no longer in the snapshot.
-    fn key_by(&mut self, s: &GrainSnapshot, orphans: &mut Vec<Entity>) {
+    fn key_by(&mut self, world: &World, s: &GrainSnapshot, orphans: &mut Vec<Entity>) {
         if self.layout != s.layout {
-            let new_code = |code: u32| -> Option<u32> {
-                match ContactBodies::wall_of(code) {
-                    Some(k) => s.wall_index(self.walls[k]).map(ContactBodies::wall_code),
-                    None => s.dense(self.entities[code as usize]).map(|d| d as u32),
-                }
+            // Each contact's own bodies give its place in the new order.
+            let new_codes = |contact: Entity| -> Option<(u32, u32)> {
+                let c = world.get::<Contact>(contact)?;
+                let a = s.dense(c.a)? as u32;
+                let b = match c.kind {
+                    ContactKind::GrainGrain => s.dense(c.b)? as u32,
+                    ContactKind::GrainWall => ContactBodies::wall_code(s.wall_index(c.b)?),
+                };
+                Some(first_in_order(a, b))
             };
             let mut rekeyed: Vec<GrainContacts> = Vec::new();
             rekeyed.resize_with(s.len(), SmallVec::new);
-            for (k, entries) in self.per_grain.iter().enumerate() {
-                for entry in entries {
-                    let key = s.dense(self.entities[k]).map(|d| d as u32);
-                    match (key, new_code(entry.partner)) {
-                        (Some(d), Some(partner)) => {
-                            let (key, partner) = first_in_order(d, partner);
-                            rekeyed[key as usize].push(IndexEntry { partner, ..*entry });
-                        }
-                        _ => orphans.push(entry.contact),
+            for entry in self.per_grain.iter().flatten() {
+                match new_codes(entry.contact) {
+                    Some((key, partner)) => {
+                        rekeyed[key as usize].push(IndexEntry { partner, ..*entry });
                     }
+                    None => orphans.push(entry.contact),
                 }
             }
             self.per_grain = rekeyed;
-            self.entities.clone_from(&s.entity);
-            self.walls.clear();
-            self.walls.extend(s.walls.iter().map(|w| w.entity));
             self.layout = s.layout;
         }
         // A restored contact counts as found at the previous pass, like a live one.
@@ -199,7 +187,7 @@ fn update_contacts_inner(
     range: f64,
 ) {
     let mut orphans = Vec::new();
-    index.key_by(s, &mut orphans);
+    index.key_by(world, s, &mut orphans);
     index.pass = index.pass.wrapping_add(1);
     let pass = index.pass;
     let n = s.len();
@@ -286,6 +274,18 @@ fn update_contacts_inner(
                 });
             }
         });
+    // Ended contacts go first, so that the new ones take the freed rows instead of
+    // growing the table (which doubles its capacity when full). Despawning moves the last contact of the table into the freed row, so the order of
+    // removals sets the order in which forces are summed from then on. Remove in table
+    // order (a fixed function of the state, not of entity ids or of the index's
+    // layout), last row first so that no removal moves a contact still to be removed.
+    orphans.retain(|&c| world.get_entity(c).is_ok());
+    orphans.extend(ended[..chunks].iter().flatten().copied());
+    orphans
+        .sort_unstable_by_key(|&c| std::cmp::Reverse(world.entity(c).location().table_row.index()));
+    for &c in orphans.iter() {
+        world.despawn(c);
+    }
     // New contacts are spawned in the order the pairs were found (chunk by chunk, grain
     // by grain, partner by partner, walls last): a fixed function of the state.
     for &(i, j) in new_pairs[..chunks].iter().flatten() {
@@ -318,16 +318,5 @@ fn update_contacts_inner(
             seen: pass,
             contact,
         });
-    }
-    // Despawning moves the last contact of the table into the freed row, so the order of
-    // removals sets the order in which forces are summed from then on. Remove in table
-    // order (a fixed function of the state, not of entity ids or of the index's
-    // layout), last row first so that no removal moves a contact still to be removed.
-    orphans.retain(|&c| world.get_entity(c).is_ok());
-    orphans.extend(ended[..chunks].iter().flatten().copied());
-    orphans
-        .sort_unstable_by_key(|&c| std::cmp::Reverse(world.entity(c).location().table_row.index()));
-    for &c in orphans.iter() {
-        world.despawn(c);
     }
 }

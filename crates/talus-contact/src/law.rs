@@ -277,7 +277,7 @@ pub fn install_law<L: ContactLaw>(
             pair_slot: slot as u32,
             spawn: spawn_contact::<L>,
             law_type: std::any::type_name::<L>(),
-            history: contact_history::<L>,
+            history_bytes: contact_history_bytes::<L>,
             history_text: contact_history_text::<L>,
             restore: restore_contact::<L>,
         });
@@ -393,17 +393,24 @@ impl LawRegistry {
     }
 }
 
-/// A copy of the history of a contact of law `L`, for an in-memory saved state (the run's
-/// last good state): a plain clone, no text.
-fn contact_history<L: ContactLaw>(
-    world: &World,
-    contact: Entity,
-) -> Option<Box<dyn Any + Send + Sync>> {
-    let state = world.get::<LawState<L::History>>(contact)?;
-    Some(Box::new(state.0.clone()))
+/// Appends the binary (postcard) encoding of the history of a contact of law `L` to
+/// `out`, for a binary state (the run's last good state on disk); false if the contact
+/// has no history of this law.
+fn contact_history_bytes<L: ContactLaw>(world: &World, contact: Entity, out: &mut Vec<u8>) -> bool {
+    let Some(state) = world.get::<LawState<L::History>>(contact) else {
+        return false;
+    };
+    match postcard::to_extend(&state.0, std::mem::take(out)) {
+        Ok(bytes) => {
+            *out = bytes;
+            true
+        }
+        Err(_) => false,
+    }
 }
 
-/// A history copied by [`contact_history`] as RON text, for a saved state file.
-fn contact_history_text<L: ContactLaw>(history: &(dyn Any + Send + Sync)) -> Option<String> {
-    ron::to_string(history.downcast_ref::<L::History>()?).ok()
+/// A history encoded by [`contact_history_bytes`] as RON text, for a saved state file.
+fn contact_history_text<L: ContactLaw>(bytes: &[u8]) -> Option<String> {
+    let history: L::History = postcard::from_bytes(bytes).ok()?;
+    ron::to_string(&history).ok()
 }

@@ -26,11 +26,12 @@ pub struct LawSlot {
     pub spawn: fn(&mut World, Contact) -> Entity,
     /// The law's Rust type name: a saved contact is restored only into the same law.
     pub law_type: &'static str,
-    /// A copy of the history of one of this law's contacts (in-memory saved states).
-    pub history: fn(&World, Entity) -> Option<Box<dyn std::any::Any + Send + Sync>>,
-    /// A history copied by [`Self::history`] as RON text (saved state files); `None` if
-    /// it is not this law's.
-    pub history_text: fn(&(dyn std::any::Any + Send + Sync)) -> Option<String>,
+    /// Appends the binary encoding of one of this law's contacts' history to the buffer
+    /// (binary states); false if the contact has no history of this law.
+    pub history_bytes: fn(&World, Entity, &mut Vec<u8>) -> bool,
+    /// A history encoded by [`Self::history_bytes`] as RON text (saved state files);
+    /// `None` if the bytes are not one of this law's histories.
+    pub history_text: fn(&[u8]) -> Option<String>,
     /// Re-creates a saved contact with its geometry, force and history (RON text).
     pub restore:
         fn(&mut World, Contact, ContactGeometry, ContactForce, &str) -> Result<Entity, String>,

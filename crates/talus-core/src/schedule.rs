@@ -392,6 +392,10 @@ impl Simulation {
 
     fn run_pass(&mut self) -> Result<(), BlowUp> {
         self.schedule.run(&mut self.world);
+        // Despawned contacts leave removal messages in the world until its trackers are
+        // cleared (an app does it every frame): without this they pile up for the whole
+        // run, about 80 bytes per grain every 100 steps of a flowing packing.
+        self.world.clear_trackers();
         self.world
             .resource_mut::<StageTimings>()
             .close_mark(Instant::now());

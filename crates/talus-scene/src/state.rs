@@ -12,9 +12,9 @@
 //!   so no priming pass runs;
 //! * floats are written in Rust's shortest round-trip form and read back exactly.
 
-use std::any::Any;
 use std::collections::HashMap;
-use std::path::Path;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
@@ -152,7 +152,11 @@ pub struct SavedState {
 impl SavedState {
     /// Takes the state of a simulation after a completed step (or the priming pass).
     pub fn capture(world: &mut World, scene: &str) -> Self {
-        CompactState::capture(world, scene).to_saved()
+        // One capture for both kinds of state: the binary encoding, read back at once.
+        let mut bytes = Vec::new();
+        encode_state(world, scene, &mut bytes).expect("writing to memory cannot fail");
+        decode_state(&bytes, world.get_resource::<ContactLawTable>())
+            .expect("a state just encoded decodes")
     }
 
     /// Writes the state as RON.
@@ -281,6 +285,366 @@ pub fn restore_contacts(
     Ok(restored)
 }
 
+/// Opens every binary state: "TALUS", "BS" for binary state, and the format version.
+const BINARY_MAGIC: [u8; 8] = *b"TALUSBS\x01";
+
+/// The parts of a binary state before its grains.
+#[derive(Serialize, Deserialize)]
+struct BinaryHeader {
+    /// Everything but the grains and contacts (those lists are empty here).
+    state: SavedState,
+    /// Material names, indexed by [`BinaryGrain::material`].
+    materials: Vec<String>,
+    /// Law type names, indexed by [`BinaryContact::law`].
+    laws: Vec<String>,
+    /// How many grains follow.
+    grains: u64,
+}
+
+/// One grain of a binary state: a [`SavedGrain`] with its material as an index.
+#[derive(Serialize, Deserialize)]
+struct BinaryGrain {
+    position: DVec3,
+    velocity: DVec3,
+    angular_velocity: DVec3,
+    force: DVec3,
+    torque: DVec3,
+    radius: f64,
+    mass: f64,
+    inertia: f64,
+    material: u16,
+    frozen: bool,
+}
+
+/// The second body of a [`BinaryContact`].
+#[derive(Serialize, Deserialize)]
+enum BinaryBody {
+    /// A grain, by index in the state's grains.
+    Grain(u32),
+    /// A wall, by index in the state's walls.
+    Wall(u32),
+}
+
+/// One contact of a binary state; `H` is its law's history in the law's own binary
+/// encoding (`&[u8]` when written, `Vec<u8>` when read).
+#[derive(Serialize, Deserialize)]
+struct BinaryContact<H> {
+    a: u32,
+    b: BinaryBody,
+    /// Index into [`BinaryHeader::laws`].
+    law: u16,
+    geometry: ContactGeometryParts,
+    force: ContactForceParts,
+    history: H,
+}
+
+/// [`ContactGeometry`] as plain fields.
+#[derive(Serialize, Deserialize)]
+struct ContactGeometryParts(DVec3, f64, DVec3);
+
+/// [`ContactForce`] as plain fields.
+#[derive(Serialize, Deserialize)]
+struct ContactForceParts(DVec3, DVec3, DVec3);
+
+fn encode_error(e: impl std::fmt::Display) -> String {
+    format!("cannot encode the state: {e}")
+}
+
+/// Appends one item's postcard encoding to `out`, through the reused buffer `buf`
+/// (`postcard::to_io` would flush the writer after every item: a system call per grain).
+fn put(item: &impl Serialize, buf: &mut Vec<u8>, out: &mut impl Write) -> Result<(), String> {
+    buf.clear();
+    *buf = postcard::to_extend(item, std::mem::take(buf)).map_err(encode_error)?;
+    out.write_all(buf).map_err(encode_error)
+}
+
+/// Writes the state of a simulation after a completed step (or the priming pass) in
+/// Talus's binary state format: a header, then the grains, then the contacts, each item
+/// in postcard's encoding, streamed straight from the world (no copy of the state is
+/// held: `talus run` writes its last good state this way at every report).
+fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<(), String> {
+    let config = world.resource::<SimConfig>().clone();
+    let clock = world.resource::<Clock>().clone();
+    let materials: Vec<String> = world
+        .resource::<Materials>()
+        .0
+        .iter()
+        .map(|m| m.name.clone())
+        .collect();
+    let table = world.get_resource::<ContactLawTable>().cloned();
+    let mut laws: Vec<String> = Vec::new();
+    for slot in table.iter().flat_map(|t| t.slots.iter().flatten()) {
+        if !laws.iter().any(|l| l == slot.law_type) {
+            laws.push(slot.law_type.to_string());
+        }
+    }
+    let mut walls = Vec::new();
+    let mut wall_entities: Vec<(Entity, u16)> = Vec::new();
+    let mut q = world.query::<(Entity, &Wall, &WallLoad)>();
+    for (e, w, l) in q.iter(world) {
+        wall_entities.push((e, w.material.0));
+        walls.push(SavedWall {
+            name: w.name.clone(),
+            point: w.point,
+            normal: w.normal,
+            velocity: w.velocity,
+            load: l.0,
+        });
+    }
+    let periodic = world
+        .get_resource::<PeriodicBox>()
+        .map(|b| SavedPeriodicBox {
+            lo: b.lo,
+            hi: b.hi,
+            axes: b.axes,
+        });
+    let state = SavedState {
+        format: STATE_FORMAT,
+        talus_version: env!("CARGO_PKG_VERSION").to_string(),
+        scene: scene.to_string(),
+        dimension: config.dimension.as_number() as u8,
+        time_step: config.dt,
+        step: clock.step,
+        time: clock.time,
+        periodic,
+        grains: Vec::new(),
+        walls,
+        contacts: Vec::new(),
+        ledger: world.resource::<EnergyLedger>().clone(),
+        energy: world.resource::<EnergySnapshot>().clone(),
+        deposition: world
+            .get_resource::<crate::packing::Deposition>()
+            .map(|d| d.progress),
+        gear: match config.integrator {
+            Integrator::Gear => world.get_resource::<GearHistory>().cloned(),
+            _ => None,
+        },
+    };
+    let mut grains = world.query_filtered::<(
+        Entity,
+        (&Position, &Velocity, &AngularVelocity, &Radius),
+        (&Mass, &MomentOfInertia, &MaterialId, &Force, &Torque),
+        Has<Frozen>,
+    ), With<Grain>>();
+    out.write_all(&BINARY_MAGIC).map_err(encode_error)?;
+    let header = BinaryHeader {
+        state,
+        materials,
+        laws,
+        grains: grains.iter(world).len() as u64,
+    };
+    let mut buf = Vec::new();
+    put(&header, &mut buf, out)?;
+    // Grain index of each grain entity, by entity index (no hashing: a state of half a
+    // million grains is written at every report). A contact's bodies are checked to be
+    // live grains by looking their material up, which also picks the contact's law.
+    let mut index: Vec<u32> = Vec::new();
+    for (k, (e, (p, v, w, r), (m, i, mat, f, t), frozen)) in grains.iter(world).enumerate() {
+        let slot = e.index_u32() as usize;
+        if index.len() <= slot {
+            index.resize(slot + 1, u32::MAX);
+        }
+        index[slot] = k as u32;
+        let grain = BinaryGrain {
+            position: p.0,
+            velocity: v.0,
+            angular_velocity: w.0,
+            force: f.0,
+            torque: t.0,
+            radius: r.0,
+            mass: m.0,
+            inertia: i.0,
+            material: mat.0,
+            frozen,
+        };
+        put(&grain, &mut buf, out)?;
+    }
+    let grain_of = |world: &World, e: Entity| {
+        let material = world
+            .get::<MaterialId>(e)
+            .filter(|_| world.get::<Grain>(e).is_some())?;
+        let k = index.get(e.index_u32() as usize).copied()?;
+        (k != u32::MAX).then_some((k, material.0))
+    };
+    // Contacts follow, each tagged `Some`, and a `None` ends them (a contact whose body
+    // is gone is skipped, so their number is known only at the end).
+    if let Some(table) = table {
+        let mut history = Vec::new();
+        let mut q = world.query::<(Entity, &Contact, &ContactGeometry, &ContactForce)>();
+        for (e, c, g, f) in q.iter(world) {
+            let Some((a, mat_a)) = grain_of(world, c.a) else {
+                continue;
+            };
+            let (b, mat_b) = match c.kind {
+                ContactKind::GrainGrain => match grain_of(world, c.b) {
+                    Some((j, mat_b)) => (BinaryBody::Grain(j), mat_b),
+                    None => continue,
+                },
+                ContactKind::GrainWall => match wall_entities.iter().position(|&(w, _)| w == c.b) {
+                    Some(k) => (BinaryBody::Wall(k as u32), wall_entities[k].1),
+                    None => continue,
+                },
+            };
+            let Some(slot) = table.get(mat_a, mat_b) else {
+                continue;
+            };
+            history.clear();
+            if !(slot.history_bytes)(world, e, &mut history) {
+                continue;
+            }
+            let contact = BinaryContact {
+                a,
+                b,
+                law: header
+                    .laws
+                    .iter()
+                    .position(|l| l == slot.law_type)
+                    .unwrap_or(0) as u16,
+                geometry: ContactGeometryParts(g.normal, g.overlap, g.point),
+                force: ContactForceParts(f.force, f.torque_a, f.torque_b),
+                history: history.as_slice(),
+            };
+            put(&Some(contact), &mut buf, out)?;
+        }
+    }
+    put(&None::<BinaryContact<&[u8]>>, &mut buf, out)?;
+    Ok(())
+}
+
+/// Reads a state written by [`encode_state`], turning material and wall indices into
+/// names and each contact's history into RON text by its law in `table`.
+fn decode_state(bytes: &[u8], table: Option<&ContactLawTable>) -> Result<SavedState, String> {
+    let fail = |e: postcard::Error| format!("not a readable binary state: {e}");
+    let rest = bytes
+        .strip_prefix(&BINARY_MAGIC)
+        .ok_or("not a Talus binary state (its first bytes are not TALUSBS, format 1)")?;
+    let (header, mut rest): (BinaryHeader, _) = postcard::take_from_bytes(rest).map_err(fail)?;
+    let BinaryHeader {
+        mut state,
+        materials,
+        laws,
+        grains,
+    } = header;
+    let material = |k: u16| {
+        materials
+            .get(k as usize)
+            .cloned()
+            .ok_or_else(|| format!("material {k} is not in the binary state"))
+    };
+    for _ in 0..grains {
+        let (g, tail): (BinaryGrain, _) = postcard::take_from_bytes(rest).map_err(fail)?;
+        rest = tail;
+        state.grains.push(SavedGrain {
+            position: g.position,
+            velocity: g.velocity,
+            angular_velocity: g.angular_velocity,
+            radius: g.radius,
+            mass: g.mass,
+            inertia: g.inertia,
+            material: material(g.material)?,
+            frozen: g.frozen,
+            force: g.force,
+            torque: g.torque,
+        });
+    }
+    loop {
+        let (c, tail): (Option<BinaryContact<Vec<u8>>>, _) =
+            postcard::take_from_bytes(rest).map_err(fail)?;
+        rest = tail;
+        let Some(c) = c else { break };
+        let law = laws
+            .get(c.law as usize)
+            .ok_or_else(|| format!("law {} is not in the binary state", c.law))?;
+        let history = table
+            .and_then(|t| t.slots.iter().flatten().find(|s| s.law_type == law))
+            .and_then(|slot| (slot.history_text)(&c.history))
+            .ok_or_else(|| format!("a contact's history of law {law} cannot be read"))?;
+        let ContactGeometryParts(normal, overlap, point) = c.geometry;
+        let ContactForceParts(force, torque_a, torque_b) = c.force;
+        state.contacts.push(SavedContact {
+            law: law.clone(),
+            a: c.a,
+            b: match c.b {
+                BinaryBody::Grain(j) => SavedBody::Grain(j),
+                BinaryBody::Wall(k) => SavedBody::Wall(
+                    state
+                        .walls
+                        .get(k as usize)
+                        .ok_or_else(|| format!("wall {k} is not in the binary state"))?
+                        .name
+                        .clone(),
+                ),
+            },
+            normal,
+            overlap,
+            point,
+            force,
+            torque_a,
+            torque_b,
+            history,
+        });
+    }
+    Ok(state)
+}
+
+/// A run's last good state kept on disk in Talus's binary state format, rewritten at
+/// every report: `talus run` holds no copy of the state in memory (that copy was about a
+/// third of a large run's memory). Each write goes to a temporary file that then
+/// replaces the previous one, so a failed write leaves the last complete state.
+#[derive(Debug)]
+pub struct BinaryStateFile {
+    path: PathBuf,
+    step: Option<u64>,
+}
+
+impl BinaryStateFile {
+    /// A state file at `path`; nothing is written yet.
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self {
+            path: path.into(),
+            step: None,
+        }
+    }
+
+    /// Writes the state of a simulation after a completed step (or the priming pass),
+    /// replacing the previous one.
+    pub fn write(&mut self, world: &mut World, scene: &str) -> Result<(), String> {
+        let tmp = self.path.with_extension("tmp");
+        let file = std::fs::File::create(&tmp)
+            .map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
+        let mut out = std::io::BufWriter::with_capacity(1 << 16, file);
+        encode_state(world, scene, &mut out)?;
+        out.flush()
+            .map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
+        drop(out);
+        std::fs::rename(&tmp, &self.path)
+            .map_err(|e| format!("cannot write {}: {e}", self.path.display()))?;
+        self.step = Some(world.resource::<Clock>().step);
+        Ok(())
+    }
+
+    /// Steps done when the state on disk was taken, if one was written.
+    pub fn step(&self) -> Option<u64> {
+        self.step
+    }
+
+    /// The state on disk as a [`SavedState`], with names and each contact's history as
+    /// RON text (by the laws of `world`, the run that wrote it), to write as RON.
+    pub fn read(&self, world: &World) -> Result<SavedState, String> {
+        let bytes = std::fs::read(&self.path)
+            .map_err(|e| format!("cannot read {}: {e}", self.path.display()))?;
+        decode_state(&bytes, world.get_resource::<ContactLawTable>())
+            .map_err(|e| format!("{}: {e}", self.path.display()))
+    }
+
+    /// Deletes the file (a run that ended well needs no last good state).
+    pub fn remove(self) {
+        if self.step.is_some() {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -339,245 +703,6 @@ mod tests {
                     assert_eq!(p[d].to_bits(), q[d].to_bits(), "{} vs {}", p[d], q[d]);
                 }
             }
-        }
-    }
-}
-
-/// One grain of a [`CompactState`]: a [`SavedGrain`] with its material as an index.
-#[derive(Clone, Copy, Debug)]
-struct CompactGrain {
-    position: DVec3,
-    velocity: DVec3,
-    angular_velocity: DVec3,
-    force: DVec3,
-    torque: DVec3,
-    radius: f64,
-    mass: f64,
-    inertia: f64,
-    material: u16,
-    frozen: bool,
-}
-
-/// The second body of a [`CompactContact`].
-#[derive(Clone, Copy, Debug)]
-enum CompactBody {
-    /// A grain, by index in the state's grains.
-    Grain(u32),
-    /// A wall, by index in the state's walls.
-    Wall(u32),
-}
-
-/// One contact of a [`CompactState`]: its law's history is a copy of the law's own value.
-struct CompactContact {
-    a: u32,
-    b: CompactBody,
-    /// The law's Rust type name (see [`SavedContact::law`]).
-    law: &'static str,
-    /// Turns [`Self::history`] into RON text.
-    history_text: fn(&(dyn Any + Send + Sync)) -> Option<String>,
-    geometry: ContactGeometry,
-    force: ContactForce,
-    history: Box<dyn Any + Send + Sync>,
-}
-
-/// The state of a run held in memory, as `talus run` keeps its last good state: what a
-/// [`SavedState`] holds, with materials and walls as indices and each contact's history as
-/// a copy of the law's own value rather than RON text. A contact then takes about a third
-/// of the memory of a [`SavedContact`] (whose history text alone is a few hundred bytes).
-/// [`Self::to_saved`] makes the [`SavedState`] to write.
-pub struct CompactState {
-    /// Everything but the grains and contacts (those lists are empty here).
-    header: SavedState,
-    material_names: Vec<String>,
-    grains: Vec<CompactGrain>,
-    contacts: Vec<CompactContact>,
-}
-
-impl CompactState {
-    /// Takes the state of a simulation after a completed step (or the priming pass).
-    pub fn capture(world: &mut World, scene: &str) -> Self {
-        let config = world.resource::<SimConfig>().clone();
-        let clock = world.resource::<Clock>().clone();
-        let material_names: Vec<String> = world
-            .resource::<Materials>()
-            .0
-            .iter()
-            .map(|m| m.name.clone())
-            .collect();
-        // Grain index of each grain entity, by entity index (no hashing: a state of half a
-        // million grains is taken at every report).
-        let mut index: Vec<u32> = Vec::new();
-        let mut q = world.query_filtered::<(
-            Entity,
-            (&Position, &Velocity, &AngularVelocity, &Radius),
-            (&Mass, &MomentOfInertia, &MaterialId, &Force, &Torque),
-            Has<Frozen>,
-        ), With<Grain>>();
-        // Sized once: growing by doubling would hold the old and the new buffer at once.
-        let count = q.iter(world).len();
-        let mut grain_entities: Vec<Entity> = Vec::with_capacity(count);
-        let mut grains = Vec::with_capacity(count);
-        for (e, (p, v, w, r), (m, i, mat, f, t), frozen) in q.iter(world) {
-            let slot = e.index_u32() as usize;
-            if index.len() <= slot {
-                index.resize(slot + 1, u32::MAX);
-            }
-            index[slot] = grains.len() as u32;
-            grain_entities.push(e);
-            grains.push(CompactGrain {
-                position: p.0,
-                velocity: v.0,
-                angular_velocity: w.0,
-                force: f.0,
-                torque: t.0,
-                radius: r.0,
-                mass: m.0,
-                inertia: i.0,
-                material: mat.0,
-                frozen,
-            });
-        }
-        let grain_of = |e: Entity| {
-            index
-                .get(e.index_u32() as usize)
-                .copied()
-                .filter(|&k| k != u32::MAX && grain_entities[k as usize] == e)
-        };
-        let mut walls = Vec::new();
-        let mut wall_entities: Vec<(Entity, u16)> = Vec::new();
-        let mut q = world.query::<(Entity, &Wall, &WallLoad)>();
-        for (e, w, l) in q.iter(world) {
-            wall_entities.push((e, w.material.0));
-            walls.push(SavedWall {
-                name: w.name.clone(),
-                point: w.point,
-                normal: w.normal,
-                velocity: w.velocity,
-                load: l.0,
-            });
-        }
-        let mut contacts = Vec::new();
-        if let Some(table) = world.get_resource::<ContactLawTable>().cloned() {
-            let mut q = world.query::<(Entity, &Contact, &ContactGeometry, &ContactForce)>();
-            contacts.reserve_exact(q.iter(world).len());
-            for (e, c, g, f) in q.iter(world) {
-                let Some(a) = grain_of(c.a) else { continue };
-                let (b, mat_b) = match c.kind {
-                    ContactKind::GrainGrain => match grain_of(c.b) {
-                        Some(j) => (CompactBody::Grain(j), grains[j as usize].material),
-                        None => continue,
-                    },
-                    ContactKind::GrainWall => {
-                        match wall_entities.iter().position(|&(w, _)| w == c.b) {
-                            Some(k) => (CompactBody::Wall(k as u32), wall_entities[k].1),
-                            None => continue,
-                        }
-                    }
-                };
-                let Some(slot) = table.get(grains[a as usize].material, mat_b) else {
-                    continue;
-                };
-                let Some(history) = (slot.history)(world, e) else {
-                    continue;
-                };
-                contacts.push(CompactContact {
-                    a,
-                    b,
-                    law: slot.law_type,
-                    history_text: slot.history_text,
-                    geometry: *g,
-                    force: *f,
-                    history,
-                });
-            }
-        }
-        let periodic = world
-            .get_resource::<PeriodicBox>()
-            .map(|b| SavedPeriodicBox {
-                lo: b.lo,
-                hi: b.hi,
-                axes: b.axes,
-            });
-        let header = SavedState {
-            format: STATE_FORMAT,
-            talus_version: env!("CARGO_PKG_VERSION").to_string(),
-            scene: scene.to_string(),
-            dimension: config.dimension.as_number() as u8,
-            time_step: config.dt,
-            step: clock.step,
-            time: clock.time,
-            periodic,
-            grains: Vec::new(),
-            walls,
-            contacts: Vec::new(),
-            ledger: world.resource::<EnergyLedger>().clone(),
-            energy: world.resource::<EnergySnapshot>().clone(),
-            deposition: world
-                .get_resource::<crate::packing::Deposition>()
-                .map(|d| d.progress),
-            gear: match config.integrator {
-                Integrator::Gear => world.get_resource::<GearHistory>().cloned(),
-                _ => None,
-            },
-        };
-        Self {
-            header,
-            material_names,
-            grains,
-            contacts,
-        }
-    }
-
-    /// Steps done when the state was taken.
-    pub fn step(&self) -> u64 {
-        self.header.step
-    }
-
-    /// The same state as a [`SavedState`], with names and RON text, to write or restore.
-    pub fn to_saved(&self) -> SavedState {
-        let grains = self
-            .grains
-            .iter()
-            .map(|g| SavedGrain {
-                position: g.position,
-                velocity: g.velocity,
-                angular_velocity: g.angular_velocity,
-                radius: g.radius,
-                mass: g.mass,
-                inertia: g.inertia,
-                material: self.material_names[g.material as usize].clone(),
-                frozen: g.frozen,
-                force: g.force,
-                torque: g.torque,
-            })
-            .collect();
-        let contacts = self
-            .contacts
-            .iter()
-            .filter_map(|c| {
-                Some(SavedContact {
-                    law: c.law.to_string(),
-                    a: c.a,
-                    b: match c.b {
-                        CompactBody::Grain(j) => SavedBody::Grain(j),
-                        CompactBody::Wall(k) => {
-                            SavedBody::Wall(self.header.walls[k as usize].name.clone())
-                        }
-                    },
-                    normal: c.geometry.normal,
-                    overlap: c.geometry.overlap,
-                    point: c.geometry.point,
-                    force: c.force.force,
-                    torque_a: c.force.torque_a,
-                    torque_b: c.force.torque_b,
-                    history: (c.history_text)(&*c.history)?,
-                })
-            })
-            .collect();
-        SavedState {
-            grains,
-            contacts,
-            ..self.header.clone()
         }
     }
 }
