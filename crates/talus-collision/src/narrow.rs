@@ -274,9 +274,11 @@ fn update_contacts_inner(
                 });
             }
         });
-    // Ended contacts go first, so that the new ones take the freed rows instead of
-    // growing the table (which doubles its capacity when full). Despawning moves the last contact of the table into the freed row, so the order of
-    // removals sets the order in which forces are summed from then on. Remove in table
+    // Ended contacts go first, so that the new ones take their freed rows and entity
+    // slots instead of growing the table and the entity list (both double their
+    // capacity when full). Despawning moves the last contact of the table into the freed
+    // row, so the order of removals sets the order in which forces are summed from then
+    // on. Remove in table
     // order (a fixed function of the state, not of entity ids or of the index's
     // layout), last row first so that no removal moves a contact still to be removed.
     orphans.retain(|&c| world.get_entity(c).is_ok());
