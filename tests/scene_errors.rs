@@ -190,3 +190,30 @@ fn strain_rate_wall_needs_a_facing_wall_by_name() {
     assert!(e.field.ends_with("strain_rate.rate"), "{e}");
     assert!(e.expected.contains("same rate"), "{e}");
 }
+
+#[test]
+fn grains_overlapping_through_a_periodic_seam() {
+    let text = r#"Scene(
+    name: "seam",
+    steps: 10,
+    periodic: (x: (0.0, 0.1)),
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 1e4, restitution: 0.5))],
+    grains: [List(material: "glass", grains: [
+        (position: (0.005, 0.0, 0.0), radius: 0.01),
+        (position: (0.05, 0.0, 0.0), radius: 0.01),
+        (position: (0.095, 0.0, 0.0), radius: 0.01),
+    ])],
+)"#;
+    let e = error_of(text);
+    assert!(e.field.starts_with("grains[0]"), "{e}");
+    assert!(e.expected.contains("across the periodic boundary"), "{e}");
+    assert!(e.to_string().contains("through the seam"), "{e}");
+    // The same grains a little further apart are accepted: 0.02 apart through the seam.
+    let clear = text.replace("0.095", "0.085");
+    parse("clear.ron", &clear)
+        .unwrap()
+        .build(&talus::registry())
+        .unwrap();
+}
