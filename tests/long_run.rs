@@ -1,0 +1,63 @@
+//! A long run keeps no bookkeeping that grows with the number of steps: what a run holds
+//! between steps is bounded by its grains and live contacts, not by its history.
+
+mod common;
+
+use std::collections::HashSet;
+
+use bevy_ecs::prelude::*;
+use talus::contact::Contact;
+use talus::core::schedule::Simulation;
+
+/// Every contact that ends leaves a removal message per component in the world (and
+/// every `resource_scope` one per resource it takes out); a run that never clears them
+/// holds them all (a leak of 10 MB per 100 steps at 128,000 flowing grains). After a
+/// settling pile has ended far more contacts than it holds at once, the world holds only
+/// the messages of the last two steps: one `Contact` removal per contact ended there,
+/// and a fixed number of others.
+#[test]
+fn ended_contacts_leave_no_growing_removal_messages() {
+    let (mut sim, _) = common::build(&common::settling_box_scene("long", 4000));
+    sim.prime().unwrap();
+    let live = |sim: &mut Simulation| -> HashSet<Entity> {
+        sim.world
+            .query_filtered::<Entity, With<Contact>>()
+            .iter(&sim.world)
+            .collect()
+    };
+    let contact_id = sim.world.register_component::<Contact>();
+    let mut previous = live(&mut sim);
+    let mut ended = 0;
+    let mut ended_last_two = [0usize; 2];
+    let mut others_at_start = None;
+    for _ in 0..4000 {
+        sim.step().unwrap();
+        let now = live(&mut sim);
+        let gone = previous.difference(&now).count();
+        ended += gone;
+        ended_last_two = [ended_last_two[1], gone];
+        previous = now;
+        let removed = sim.world.removed_components();
+        let contacts_held = removed.get(contact_id).map_or(0, |m| m.len());
+        let held: usize = removed.iter().map(|(_, m)| m.len()).sum();
+        let recent = ended_last_two[0] + ended_last_two[1];
+        assert!(
+            contacts_held <= recent,
+            "{contacts_held} contact removals held after {} steps; {recent} contacts ended in the last two",
+            sim.step_count()
+        );
+        // Components of a contact entity: the pair, geometry, force, body indices and
+        // the law's history; the rest come from the steps themselves, as many each step.
+        let others = held - 5 * contacts_held.min(recent);
+        let start = *others_at_start.get_or_insert(others);
+        assert!(
+            others <= start.max(1) * 2,
+            "{others} other removal messages held after {} steps ({start} after the first)",
+            sim.step_count()
+        );
+    }
+    assert!(
+        ended > 200,
+        "the pile ended too few contacts ({ended}) for the test to tell a leak"
+    );
+}
