@@ -220,9 +220,7 @@ pub fn run_scene(
         blow_up = Some(b);
     } else {
         samples.push(ReportSample::take(&sim.world));
-        last_good
-            .write(&mut sim.world, &built.name)
-            .map_err(RunError::Output)?;
+        keep_last_good(&mut last_good, &mut sim.world, &built.name, options.quiet);
         for step in sim.step_count() + 1..=total_steps {
             if let Err(b) = sim.step() {
                 blow_up = Some(b);
@@ -240,9 +238,7 @@ pub fn run_scene(
                     .settle_kinetic_energy
                     .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
                 samples.push(sample);
-                last_good
-                    .write(&mut sim.world, &built.name)
-                    .map_err(RunError::Output)?;
+                keep_last_good(&mut last_good, &mut sim.world, &built.name, options.quiet);
                 if let Some(reason) = requested {
                     stopped = reason;
                     break;
@@ -295,15 +291,16 @@ pub fn run_scene(
     if let Some(b) = blow_up {
         report.stopped = "blow_up".into();
         let state_path = out_dir.join("last_good_state.ron");
-        let written = match last_good.step() {
-            Some(_) => {
-                last_good
-                    .read(&sim.world)
-                    .and_then(|s| s.write(&state_path))
-                    .map_err(RunError::Output)?;
-                Some(state_path.display().to_string())
-            }
-            None => None,
+        // A state that cannot be read back or written costs the state, not the report.
+        let (written, state_error) = match last_good.step() {
+            Some(_) => match last_good
+                .read(&sim.world)
+                .and_then(|s| s.write(&state_path))
+            {
+                Ok(()) => (Some(state_path.display().to_string()), None),
+                Err(e) => (None, Some(e)),
+            },
+            None => (None, None),
         };
         let bodies: Vec<String> = b
             .entities
@@ -320,7 +317,10 @@ pub fn run_scene(
                 bodies.join(", ")
             },
             last_good.step().unwrap_or(0),
-            written.clone().unwrap_or_else(|| "none".into())
+            written
+                .clone()
+                .or(state_error)
+                .unwrap_or_else(|| "none".into())
         ));
         report.blow_up = Some(BlowUpReport {
             step: b.step,
@@ -353,6 +353,19 @@ pub fn run_scene(
         report,
         state: state_path,
     })
+}
+
+/// Rewrites the last good state on disk. A failed write (a full disk) does not stop the
+/// run: the previous state stays, and a warning says so.
+fn keep_last_good(file: &mut BinaryStateFile, world: &mut World, scene: &str, quiet: bool) {
+    if let Err(e) = file.write(world, scene)
+        && !quiet
+    {
+        eprintln!(
+            "warning: {e}; the last good state on disk stays at step {}",
+            file.step().map_or("none".to_string(), |s| s.to_string())
+        );
+    }
 }
 
 /// A body named for a person: a grain by its entity id,

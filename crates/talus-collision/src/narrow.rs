@@ -85,6 +85,8 @@ impl ContactIndex {
                 .map(|d| d as u32)
                 .or_else(|| s.wall_index(body).map(ContactBodies::wall_code))
         };
+        // A pair of a grain and a wall is held under the grain, whichever way it is asked.
+        let (a, b) = if s.dense(a).is_none() { (b, a) } else { (a, b) };
         let (key, partner) = first_in_order(s.dense(a)? as u32, code(b)?);
         self.per_grain[key as usize]
             .iter()

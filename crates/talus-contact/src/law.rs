@@ -256,6 +256,17 @@ pub fn install_law<L: ContactLaw>(
         ids.iter().all(|&i| i < MAX_DISSIPATION_CHANNELS),
         "a scene may use at most {MAX_DISSIPATION_CHANNELS} dissipation mechanisms"
     );
+    // A law whose history does not survive postcard's encoding (serde attributes that need
+    // a self-describing format) would lose its contacts from every binary state: a fault
+    // of the law, told at once rather than at the first report.
+    let probe = postcard::to_allocvec(&L::History::default())
+        .map_err(|e| e.to_string())
+        .and_then(|bytes| postcard::from_bytes::<L::History>(&bytes).map_err(|e| e.to_string()));
+    assert!(
+        probe.is_ok(),
+        "law `{name}`: its history does not round-trip through postcard ({}); see docs/writing-a-contact-law.md §3.2",
+        probe.err().unwrap_or_default()
+    );
     let mut table = Vec::with_capacity(pairs.len());
     for (slot, (pair, params)) in pairs.iter().enumerate() {
         let params = params
@@ -394,19 +405,23 @@ impl LawRegistry {
 }
 
 /// Appends the binary (postcard) encoding of the history of a contact of law `L` to
-/// `out`, for a binary state (the run's last good state on disk); false if the contact
-/// has no history of this law.
-fn contact_history_bytes<L: ContactLaw>(world: &World, contact: Entity, out: &mut Vec<u8>) -> bool {
+/// `out`, for a binary state (the run's last good state on disk); `Ok(false)` if the
+/// contact has no history of this law, an error if the history cannot be encoded.
+fn contact_history_bytes<L: ContactLaw>(
+    world: &World,
+    contact: Entity,
+    out: &mut Vec<u8>,
+) -> Result<bool, String> {
     let Some(state) = world.get::<LawState<L::History>>(contact) else {
-        return false;
+        return Ok(false);
     };
-    match postcard::to_extend(&state.0, std::mem::take(out)) {
-        Ok(bytes) => {
-            *out = bytes;
-            true
-        }
-        Err(_) => false,
-    }
+    *out = postcard::to_extend(&state.0, std::mem::take(out)).map_err(|e| {
+        format!(
+            "the history of a contact of {} cannot be encoded: {e}",
+            std::any::type_name::<L>()
+        )
+    })?;
+    Ok(true)
 }
 
 /// A history encoded by [`contact_history_bytes`] as RON text, for a saved state file.

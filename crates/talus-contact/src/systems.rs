@@ -28,7 +28,9 @@ pub struct LawSlot {
     pub law_type: &'static str,
     /// Appends the binary encoding of one of this law's contacts' history to the buffer
     /// (binary states); false if the contact has no history of this law.
-    pub history_bytes: fn(&World, Entity, &mut Vec<u8>) -> bool,
+    /// An error if the history cannot be encoded (its serde attributes need a
+    /// self-describing format: docs/writing-a-contact-law.md §3.2).
+    pub history_bytes: fn(&World, Entity, &mut Vec<u8>) -> Result<bool, String>,
     /// A history encoded by [`Self::history_bytes`] as RON text (saved state files);
     /// `None` if the bytes are not one of this law's histories.
     pub history_text: fn(&[u8]) -> Option<String>,

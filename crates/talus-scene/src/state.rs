@@ -489,7 +489,7 @@ fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<
                 continue;
             };
             history.clear();
-            if !(slot.history_bytes)(world, e, &mut history) {
+            if !(slot.history_bytes)(world, e, &mut history)? {
                 continue;
             }
             let contact = BinaryContact {
@@ -608,19 +608,30 @@ impl BinaryStateFile {
 
     /// Writes the state of a simulation after a completed step (or the priming pass),
     /// replacing the previous one.
+    /// On failure the previous state stays in place and the temporary file is removed.
     pub fn write(&mut self, world: &mut World, scene: &str) -> Result<(), String> {
         let tmp = self.path.with_extension("tmp");
-        let file = std::fs::File::create(&tmp)
-            .map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
-        let mut out = std::io::BufWriter::with_capacity(1 << 16, file);
-        encode_state(world, scene, &mut out)?;
-        out.flush()
-            .map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
-        drop(out);
-        std::fs::rename(&tmp, &self.path)
-            .map_err(|e| format!("cannot write {}: {e}", self.path.display()))?;
-        self.step = Some(world.resource::<Clock>().step);
-        Ok(())
+        let written = (|| {
+            let file = std::fs::File::create(&tmp)
+                .map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
+            let mut out = std::io::BufWriter::with_capacity(1 << 16, file);
+            encode_state(world, scene, &mut out)?;
+            out.flush()
+                .map_err(|e| format!("cannot write {}: {e}", tmp.display()))?;
+            drop(out);
+            std::fs::rename(&tmp, &self.path)
+                .map_err(|e| format!("cannot write {}: {e}", self.path.display()))
+        })();
+        match written {
+            Ok(()) => {
+                self.step = Some(world.resource::<Clock>().step);
+                Ok(())
+            }
+            Err(e) => {
+                let _ = std::fs::remove_file(&tmp);
+                Err(e)
+            }
+        }
     }
 
     /// Steps done when the state on disk was taken, if one was written.
@@ -637,8 +648,14 @@ impl BinaryStateFile {
             .map_err(|e| format!("{}: {e}", self.path.display()))
     }
 
-    /// Deletes the file (a run that ended well needs no last good state).
-    pub fn remove(self) {
+    /// Deletes the file (a run that ended well needs no last good state; one that blew
+    /// up has it as RON). Dropping the handle does the same, so an early return leaves no
+    /// scratch file behind.
+    pub fn remove(self) {}
+}
+
+impl Drop for BinaryStateFile {
+    fn drop(&mut self) {
         if self.step.is_some() {
             let _ = std::fs::remove_file(&self.path);
         }
