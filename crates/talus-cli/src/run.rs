@@ -329,8 +329,8 @@ pub fn run_scene(
             last_good_state: written,
         });
     }
-    // Written as RON if the run blew up; a scratch file otherwise.
-    last_good.remove();
+    // Written as RON if the run blew up; a scratch file otherwise (deleted on drop).
+    drop(last_good);
     let state_path = (blow_message.is_none() && (built.output.state || options.save_state))
         .then(|| out_dir.join("state.ron"));
     if let Some(p) = &state_path {

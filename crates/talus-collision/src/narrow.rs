@@ -36,7 +36,7 @@ struct IndexEntry {
 /// number; two entries fit inline (16 bytes each, 40 bytes a grain: a flowing packing
 /// has about one contact per grain), more spill to the heap. When the
 /// snapshot's order of grains or walls changes (grains added or removed, a component set
-/// changed) the index is re-keyed by entity before the next pass.
+/// changed) the index is re-keyed, from each contact's bodies, before the next pass.
 #[derive(Resource, Default)]
 pub struct ContactIndex {
     /// Live contacts of each grain, by its dense index in the snapshot of `layout`.
@@ -101,8 +101,8 @@ impl ContactIndex {
         self.pending.push((a, b, contact));
     }
 
-    /// Keys the index by the snapshot's order of grains and walls (re-keying it by entity
-    /// if the order changed) and enters the pending contacts. Adds to `orphans` the
+    /// Keys the index by the snapshot's order of grains and walls (re-keying it from each
+    /// contact's bodies if the order changed) and enters the pending contacts. Adds to `orphans` the
     /// contacts one of whose bodies is no longer in the snapshot.
     fn key_by(&mut self, world: &World, s: &GrainSnapshot, orphans: &mut Vec<Entity>) {
         if self.layout != s.layout {
@@ -280,9 +280,9 @@ fn update_contacts_inner(
     // slots instead of growing the table and the entity list (both double their
     // capacity when full). Despawning moves the last contact of the table into the freed
     // row, so the order of removals sets the order in which forces are summed from then
-    // on. Remove in table
-    // order (a fixed function of the state, not of entity ids or of the index's
-    // layout), last row first so that no removal moves a contact still to be removed.
+    // on. Remove in table order (a fixed function of the state, not of entity ids or of
+    // the index's layout), last row first so that no removal moves a contact still to be
+    // removed.
     orphans.retain(|&c| world.get_entity(c).is_ok());
     orphans.extend(ended[..chunks].iter().flatten().copied());
     orphans

@@ -1989,15 +1989,15 @@ fn check_overlaps_across_seams(
         (0..3).any(|a| b.axes[a] && (p[a] - b.lo[a] < 2.0 * rmax || b.hi[a] - p[a] < 2.0 * rmax))
     };
     let band: Vec<&GrainInit> = grains.iter().filter(|g| near_face(g.position)).collect();
-    for (i, j) in seam_candidates(&band, b, 2.0 * rmax) {
+    let check = |i: usize, j: usize| {
         let (g, h) = (band[i], band[j]);
         if g.saved.is_some() && h.saved.is_some() {
-            continue; // both from a saved state, where they touch by right
+            return Ok(()); // both from a saved state, where they touch by right
         }
         let plain = g.position - h.position;
         let image = b.min_image(plain);
         if image == plain {
-            continue; // the plain check has seen this pair
+            return Ok(()); // the plain check has seen this pair
         }
         let overlap = g.radius + h.radius - image.length();
         if overlap > tolerance * g.radius.min(h.radius) {
@@ -2009,78 +2009,121 @@ fn check_overlaps_across_seams(
                 ),
             ));
         }
+        Ok(())
+    };
+    if b.shear.as_ref().is_some_and(|s| s.offset != 0.0) {
+        // Images already shifted along the flow: a cell's image is not one of its
+        // neighbours on the grid, so every pair of the band is tried.
+        for i in 0..band.len() {
+            for j in i + 1..band.len() {
+                check(i, j)?;
+            }
+        }
+        return Ok(());
     }
-    Ok(())
+    let points: Vec<DVec3> = band.iter().map(|g| g.position).collect();
+    for_each_close_pair(&points, Some(b), 2.0 * rmax, check)
 }
 
-/// The pairs (i, j), i < j, of `band` that may lie within `reach` of each other through a
-/// periodic seam, in increasing order (the order of an all-pairs scan, so the first
-/// overlap found is the same). Neighbours on a grid of cells at least `reach` wide that
-/// wraps around the periodic axes: an all-pairs scan grows as the square of the band,
-/// 1.5 s for the 512,000-grain chute. A Lees–Edwards box whose images are already shifted
-/// falls back to all pairs (the shifted image of a cell is not one of its neighbours).
-fn seam_candidates(band: &[&GrainInit], b: &PeriodicBox, reach: f64) -> Vec<(usize, usize)> {
-    let shifted = b.shear.as_ref().is_some_and(|s| s.offset != 0.0);
-    if shifted || band.len() < 2 || !(reach > 0.0) {
-        return (0..band.len())
-            .flat_map(|i| (i + 1..band.len()).map(move |j| (i, j)))
-            .collect();
+/// Calls `visit(i, j)` once for every pair i < j of `points` that may lie within `reach`
+/// of each other: those in the same or adjacent cells of a grid at least `reach` wide,
+/// which wraps around the periodic axes of `periodic` (adjacent through the seams), in a
+/// fixed order; stops at the first error. The cells grow when they would outnumber the
+/// points eightfold, so a point flung far away costs no memory.
+fn for_each_close_pair<E>(
+    points: &[DVec3],
+    periodic: Option<&PeriodicBox>,
+    reach: f64,
+    mut visit: impl FnMut(usize, usize) -> Result<(), E>,
+) -> Result<(), E> {
+    if points.len() < 2 {
+        return Ok(());
     }
-    let low = band
+    let lo = points
         .iter()
-        .fold(DVec3::splat(f64::INFINITY), |a, g| a.min(g.position));
-    let length = b.length();
-    let mut cells = [1_i64; 3];
-    let mut size = [reach; 3];
-    let mut origin = [0.0; 3];
-    for a in 0..3 {
-        if b.axes[a] {
-            // A whole number of cells, each at least `reach` long, so the grid wraps.
-            cells[a] = ((length[a] / reach).floor() as i64).max(1);
-            size[a] = length[a] / cells[a] as f64;
-            origin[a] = b.lo[a];
-        } else {
-            origin[a] = low[a];
-        }
-    }
-    let cell_of = |p: DVec3| -> [i64; 3] {
-        std::array::from_fn(|a| {
-            let c = ((p[a] - origin[a]) / size[a]).floor() as i64;
-            if b.axes[a] { c.rem_euclid(cells[a]) } else { c }
-        })
-    };
-    let mut members: std::collections::HashMap<[i64; 3], Vec<usize>> =
-        std::collections::HashMap::new();
-    for (i, g) in band.iter().enumerate() {
-        members.entry(cell_of(g.position)).or_default().push(i);
-    }
-    let mut pairs = Vec::new();
-    let mut around = Vec::with_capacity(27);
-    for (i, g) in band.iter().enumerate() {
-        let c = cell_of(g.position);
-        around.clear();
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let cell: [i64; 3] = std::array::from_fn(|a| {
-                        let n = c[a] + [dx, dy, dz][a];
-                        if b.axes[a] { n.rem_euclid(cells[a]) } else { n }
-                    });
-                    around.push(cell);
+        .fold(DVec3::splat(f64::INFINITY), |a, p| a.min(*p));
+    let hi = points
+        .iter()
+        .fold(DVec3::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
+    let wraps = |a: usize| periodic.is_some_and(|b| b.axes[a]);
+    let max_cells = (8 * points.len()).max(4096);
+    let mut edge = reach.max(f64::MIN_POSITIVE);
+    let (dims, size, origin) = loop {
+        let mut dims = [1usize; 3];
+        let mut size = [edge; 3];
+        let mut origin = [0.0; 3];
+        for a in 0..3 {
+            match periodic.filter(|b| b.axes[a]) {
+                Some(b) => {
+                    // A whole number of cells, each at least `edge` long, so the grid wraps.
+                    let length = b.hi[a] - b.lo[a];
+                    dims[a] = ((length / edge).floor() as usize).max(1);
+                    size[a] = length / dims[a] as f64;
+                    origin[a] = b.lo[a];
+                }
+                None => {
+                    dims[a] = ((hi[a] - lo[a]) / edge).floor() as usize + 1;
+                    origin[a] = lo[a];
                 }
             }
         }
-        // With one or two cells along an axis, several offsets wrap to the same cell.
+        if dims.iter().product::<usize>() <= max_cells {
+            break (dims, size, origin);
+        }
+        edge *= 1.5;
+    };
+    let coords = |p: DVec3| -> [usize; 3] {
+        std::array::from_fn(|a| {
+            let c = ((p[a] - origin[a]) / size[a]).floor() as i64;
+            if wraps(a) {
+                c.rem_euclid(dims[a] as i64) as usize
+            } else {
+                c.clamp(0, dims[a] as i64 - 1) as usize
+            }
+        })
+    };
+    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); dims.iter().product()];
+    for (i, p) in points.iter().enumerate() {
+        bins[index(coords(*p))].push(i as u32);
+    }
+    let mut around = Vec::with_capacity(27);
+    for (i, p) in points.iter().enumerate() {
+        let c = coords(*p);
+        around.clear();
+        for dz in -1..=1_i64 {
+            for dy in -1..=1_i64 {
+                for dx in -1..=1_i64 {
+                    let near: Option<[usize; 3]> = (|| {
+                        let mut n = [0usize; 3];
+                        for (a, d) in [dx, dy, dz].into_iter().enumerate() {
+                            let m = c[a] as i64 + d;
+                            n[a] = if wraps(a) {
+                                m.rem_euclid(dims[a] as i64) as usize
+                            } else if (0..dims[a] as i64).contains(&m) {
+                                m as usize
+                            } else {
+                                return None;
+                            };
+                        }
+                        Some(n)
+                    })();
+                    around.extend(near.map(index));
+                }
+            }
+        }
+        // With one or two cells along a periodic axis, several offsets wrap to one cell.
         around.sort_unstable();
         around.dedup();
-        for cell in &around {
-            if let Some(list) = members.get(cell) {
-                pairs.extend(list.iter().filter(|&&j| j > i).map(|&j| (i, j)));
+        for &cell in &around {
+            for &j in &bins[cell] {
+                if j as usize > i {
+                    visit(i, j as usize)?;
+                }
             }
         }
     }
-    pairs.sort_unstable();
-    pairs
+    Ok(())
 }
 
 fn check_initial_overlaps(
@@ -2103,78 +2146,37 @@ fn check_initial_overlaps(
             }
         }
     }
-    // Grain–grain overlaps on a cell grid.
+    // Grain–grain overlaps, pairs taken from a cell grid.
     let rmax = grains.iter().map(|g| g.radius).fold(0.0, f64::max);
-    let lo = grains
-        .iter()
-        .fold(DVec3::splat(f64::INFINITY), |a, g| a.min(g.position));
-    let hi = grains
-        .iter()
-        .fold(DVec3::splat(f64::NEG_INFINITY), |a, g| a.max(g.position));
-    let mut cell = 2.0 * rmax;
-    let mut dims;
-    loop {
-        dims = ((hi - lo) / cell).floor() + DVec3::ONE;
-        if dims.x * dims.y * dims.z <= (8 * grains.len()).max(4096) as f64 {
-            break;
+    let points: Vec<DVec3> = grains.iter().map(|g| g.position).collect();
+    for_each_close_pair(&points, None, 2.0 * rmax, |i, j| {
+        let (g, h) = (&grains[i], &grains[j]);
+        if g.saved.is_some() && h.saved.is_some() {
+            return Ok(()); // both from a saved state, where they touch by right
         }
-        cell *= 1.5;
-    }
-    let (nx, ny, nz) = (dims.x as usize, dims.y as usize, dims.z as usize);
-    let coords = |p: DVec3| {
-        let q = (p - lo) / cell;
-        (
-            (q.x as usize).min(nx - 1),
-            (q.y as usize).min(ny - 1),
-            (q.z as usize).min(nz - 1),
-        )
-    };
-    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nx * ny * nz];
-    for (i, g) in grains.iter().enumerate() {
-        let (x, y, z) = coords(g.position);
-        bins[x + nx * (y + ny * z)].push(i as u32);
-    }
-    for (i, g) in grains.iter().enumerate() {
-        let (x, y, z) = coords(g.position);
-        for cz in z.saturating_sub(1)..=(z + 1).min(nz - 1) {
-            for cy in y.saturating_sub(1)..=(y + 1).min(ny - 1) {
-                for cx_ in x.saturating_sub(1)..=(x + 1).min(nx - 1) {
-                    for &j in &bins[cx_ + nx * (cy + ny * cz)] {
-                        let j = j as usize;
-                        if j <= i {
-                            continue;
-                        }
-                        let h = &grains[j];
-                        if g.saved.is_some() && h.saved.is_some() {
-                            continue; // both from a saved state, where they touch by right
-                        }
-                        let overlap = g.radius + h.radius - g.position.distance(h.position);
-                        if overlap > tolerance * g.radius.min(h.radius) {
-                            let field = format!("grains[{}]", h.source);
-                            return Err(cx.err(
-                                &field,
-                                format!(
-                                    "grains that do not overlap: grains at ({:.4}, {:.4}, {:.4}) (grains[{}]) and ({:.4}, {:.4}, {:.4}) overlap by {:.3e} m, more than {} of the smaller radius",
-                                    g.position.x, g.position.y, g.position.z, g.source, h.position.x, h.position.y, h.position.z, overlap, tolerance
-                                ),
-                            ));
-                        }
-                    }
-                }
-            }
+        let overlap = g.radius + h.radius - g.position.distance(h.position);
+        if overlap > tolerance * g.radius.min(h.radius) {
+            return Err(cx.err(
+                &format!("grains[{}]", h.source),
+                format!(
+                    "grains that do not overlap: grains at ({:.4}, {:.4}, {:.4}) (grains[{}]) and ({:.4}, {:.4}, {:.4}) overlap by {:.3e} m, more than {} of the smaller radius",
+                    g.position.x, g.position.y, g.position.z, g.source, h.position.x, h.position.y, h.position.z, overlap, tolerance
+                ),
+            ));
         }
-    }
-    Ok(())
+        Ok(())
+    })
 }
 
 #[cfg(test)]
-mod seam_tests {
+mod close_pair_tests {
     use super::*;
 
-    /// The grid of the seam check finds every pair of band grains within reach through a
-    /// seam, against an all-pairs scan, for boxes of one, two and many cells per axis.
+    /// The grid of the overlap checks visits every pair within reach (through the seams of
+    /// a periodic box, or plainly without one), each once, against an all-pairs scan, for
+    /// boxes of one, two and many cells per axis.
     #[test]
-    fn seam_candidates_hold_every_pair_within_reach() {
+    fn the_grid_visits_every_pair_within_reach_once() {
         let mut x = 0x9e37_79b9_7f4a_7c15_u64;
         let mut uniform = || {
             x ^= x << 13;
@@ -2194,40 +2196,40 @@ mod seam_tests {
                 shear: None,
             };
             let reach = 0.02;
-            let grains: Vec<GrainInit> = (0..600)
-                .map(|k| GrainInit {
-                    position: DVec3::new(uniform(), uniform(), uniform()) * hi,
-                    radius: 0.01,
-                    velocity: DVec3::ZERO,
-                    angular_velocity: DVec3::ZERO,
-                    material: 0,
-                    source: k,
-                    density: None,
-                    frozen: false,
-                    saved: None,
-                })
+            let points: Vec<DVec3> = (0..600)
+                .map(|_| DVec3::new(uniform(), uniform(), uniform()) * hi)
                 .collect();
-            let band: Vec<&GrainInit> = grains.iter().collect();
-            let found = seam_candidates(&band, &b, reach);
-            assert!(found.windows(2).all(|w| w[0] < w[1]), "sorted, no repeats");
-            let mut expected = 0;
-            for i in 0..band.len() {
-                for j in i + 1..band.len() {
-                    let d = b.min_image(band[i].position - band[j].position);
-                    if d.length() < reach {
-                        expected += 1;
-                        assert!(
-                            found.binary_search(&(i, j)).is_ok(),
-                            "pair ({i}, {j}) missed"
-                        );
+            for periodic in [Some(&b), None] {
+                let mut found = Vec::new();
+                for_each_close_pair(&points, periodic, reach, |i, j| {
+                    found.push((i, j));
+                    Ok::<(), ()>(())
+                })
+                .unwrap();
+                let visited = found.len();
+                found.sort_unstable();
+                found.dedup();
+                assert_eq!(found.len(), visited, "each pair once");
+                let mut expected = 0;
+                for i in 0..points.len() {
+                    for j in i + 1..points.len() {
+                        let d = points[i] - points[j];
+                        let d = periodic.map_or(d, |b| b.min_image(d));
+                        if d.length() < reach {
+                            expected += 1;
+                            assert!(
+                                found.binary_search(&(i, j)).is_ok(),
+                                "pair ({i}, {j}) missed"
+                            );
+                        }
                     }
                 }
+                assert!(expected > 10, "the test box has close pairs ({expected})");
+                assert!(
+                    found.len() < points.len() * (points.len() - 1) / 4,
+                    "not all pairs"
+                );
             }
-            assert!(expected > 10, "the test box has close pairs ({expected})");
-            assert!(
-                found.len() < band.len() * (band.len() - 1) / 4,
-                "not all pairs"
-            );
         }
     }
 }

@@ -647,13 +647,10 @@ impl BinaryStateFile {
         decode_state(&bytes, world.get_resource::<ContactLawTable>())
             .map_err(|e| format!("{}: {e}", self.path.display()))
     }
-
-    /// Deletes the file (a run that ended well needs no last good state; one that blew
-    /// up has it as RON). Dropping the handle does the same, so an early return leaves no
-    /// scratch file behind.
-    pub fn remove(self) {}
 }
 
+/// Dropping the handle deletes the file: a run that ended well needs no last good state,
+/// one that blew up has it as RON, and an early return leaves no scratch file behind.
 impl Drop for BinaryStateFile {
     fn drop(&mut self) {
         if self.step.is_some() {
