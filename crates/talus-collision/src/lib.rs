@@ -15,7 +15,7 @@ use talus_core::schedule::{Plugin, SimBuilder, Stage};
 
 pub use grid::CellGrid;
 pub use narrow::ContactIndex;
-pub use neighbours::NeighbourList;
+pub use neighbours::{CandidateChunk, NeighbourList};
 
 /// Installs the broad phase and the narrow phase.
 #[derive(Clone, Copy, Debug, Default)]

@@ -194,6 +194,7 @@ fn update_contacts_inner(
     let pass = index.pass;
     let n = s.len();
     let chunks = n.div_ceil(CHUNK);
+    let gap_threshold = list.gap_threshold();
     let ContactIndex {
         per_grain,
         new_pairs,
@@ -229,18 +230,25 @@ fn update_contacts_inner(
                     new.push((i as u32, partner));
                 }
             };
-            let mut cursor = 0;
             for i in base..(base + CHUNK).min(n) {
                 let p = s.position[i];
                 let r = s.radius[i];
-                // A frozen grain has an infinite mass in the snapshot. A contact between
+                // A frozen grain has an infinite mass (zero inverse) in the snapshot. A contact between
                 // two frozen grains, or a frozen grain and a wall, moves nothing, and its
                 // reduced mass (hence a mass-scaled dashpot) would be infinite: none is made.
-                let frozen = s.mass[i].is_infinite();
-                while cursor < candidates.len() && candidates[cursor].0 as usize == i {
-                    let j = candidates[cursor].1 as usize;
-                    cursor += 1;
-                    if frozen && s.mass[j].is_infinite() {
+                let frozen = s.inverse_mass[i] == 0.0;
+                let k = i - base;
+                let rows = candidates.first[k] as usize..candidates.first[k + 1] as usize;
+                for (&j, &gap) in candidates.partner[rows.clone()]
+                    .iter()
+                    .zip(&candidates.gap[rows])
+                {
+                    // Too far at the build to have come within reach since.
+                    if gap > gap_threshold {
+                        continue;
+                    }
+                    let j = j as usize;
+                    if frozen && s.inverse_mass[j] == 0.0 {
                         continue;
                     }
                     let reach = r + s.radius[j] + range;
@@ -258,6 +266,10 @@ fn update_contacts_inner(
                 }
             }
             for list in entries.iter_mut() {
+                // Most grains' contacts were all found again: nothing to drop.
+                if list.iter().all(|e| e.seen == pass) {
+                    continue;
+                }
                 list.retain(|e| {
                     if e.seen == pass {
                         return true;

@@ -18,14 +18,31 @@ pub const CHUNK: usize = 256;
 /// Skin as a fraction of the largest diameter (LAMMPS's chute benchmark: 0.1 of d).
 pub const SKIN_FRACTION: f64 = 0.1;
 
+/// The candidate partners of one chunk of [`CHUNK`] grains, grain by grain (compressed
+/// rows): the partners of the chunk's `k`-th grain are `partner[first[k]..first[k + 1]]`,
+/// dense indices j > i in increasing order, each with its gap at the build.
+#[derive(Default, Clone, Debug)]
+pub struct CandidateChunk {
+    /// Where each grain's partners start in `partner`, plus one final entry.
+    pub first: Vec<u32>,
+    /// Candidate partners.
+    pub partner: Vec<u32>,
+    /// Each candidate's gap at the build (distance less the reach of the pair), in units
+    /// of [`GAP_UNITS`] per skin, rounded down, 0 for pairs already within reach: a pair
+    /// cannot be within reach while twice the largest move since the build is below its gap.
+    pub gap: Vec<u16>,
+}
+
+/// Gap quanta per skin in [`CandidateChunk::gap`].
+pub const GAP_UNITS: f64 = 65_535.0;
+
 /// Candidate pairs of the last build and what they were built from.
 #[derive(Resource, Default)]
 pub struct NeighbourList {
     /// Skin beyond the reach, m (set at each build from the largest radius).
     pub skin: f64,
-    /// Candidate partners, per chunk of [`CHUNK`] grains: (i, j) dense indices with
-    /// j > i, in increasing i.
-    pub chunks: Vec<Vec<(u32, u32)>>,
+    /// Candidate partners, per chunk of [`CHUNK`] grains.
+    pub chunks: Vec<CandidateChunk>,
     /// Grain positions at the last build.
     reference: Vec<DVec3>,
     /// The snapshot layout ([`GrainSnapshot::layout`]) of the last build (0: none).
@@ -34,6 +51,10 @@ pub struct NeighbourList {
     pub builds: u64,
     /// Lees–Edwards image offset at the last build, m (0 without shear).
     offset: f64,
+    /// How much any pair's distance can have shrunk since the build, m: twice the largest
+    /// move of a grain (plus the change of the Lees–Edwards offset), as found by the last
+    /// staleness check.
+    closing: f64,
 }
 
 impl NeighbourList {
@@ -44,33 +65,64 @@ impl NeighbourList {
     }
 
     /// Whether the list must be rebuilt: first use, a changed set or order of grains or
-    /// walls (the snapshot's layout), or a grain that moved more than half the skin.
-    fn stale(&self, s: &GrainSnapshot) -> bool {
+    /// walls (the snapshot's layout), or a grain that moved more than half the skin. When
+    /// it need not, sets [`Self::closing`] for this step.
+    fn stale(&mut self, s: &GrainSnapshot) -> bool {
         if self.layout != s.layout {
             return true;
         }
         // Across a Lees–Edwards seam a pair's separation also changes with the image
         // offset: exact as long as 2 × (largest move) + |change of Δ| stays within the skin.
-        let mut half = 0.5 * self.skin;
+        let mut shift = 0.0;
         if let Some(b) = &s.periodic
             && let Some(shear) = &b.shear
         {
             let lf = b.length()[shear.flow];
-            let mut shift = (shear.offset - self.offset).abs();
+            shift = (shear.offset - self.offset).abs();
             if shift > 0.5 * lf {
                 shift = lf - shift;
             }
-            half = 0.5 * (self.skin - shift);
-            if half <= 0.0 {
-                return true;
-            }
         }
-        let limit = half * half;
-        s.position
+        let half = 0.5 * (self.skin - shift);
+        if half <= 0.0 {
+            return true;
+        }
+        // The largest move is a maximum, so the same on any number of threads.
+        let largest_sq = s
+            .position
             .par_iter()
             .with_min_len(4096)
             .zip(self.reference.par_iter())
-            .any(|(p, q)| s.separation(*p, *q).length_squared() > limit)
+            .map(|(p, q)| s.separation(*p, *q).length_squared())
+            .reduce(|| 0.0, f64::max);
+        if largest_sq > half * half {
+            return true;
+        }
+        self.closing = 2.0 * largest_sq.sqrt() + shift;
+        false
+    }
+
+    /// The gap quantum below which a candidate pair may be within reach this step: pairs
+    /// whose [`CandidateChunk::gap`] is larger are not, and need no distance test. One
+    /// quantum of margin covers the rounding of the gaps.
+    pub fn gap_threshold(&self) -> u16 {
+        if self.skin > 0.0 {
+            ((self.closing / self.skin * GAP_UNITS).ceil() + 1.0).min(GAP_UNITS) as u16
+        } else {
+            u16::MAX
+        }
+    }
+}
+
+/// The gap of a candidate pair at distance² `dist_sq` and reach `reach` (without the skin),
+/// in quanta of the skin, rounded down.
+#[inline]
+fn gap_quanta(dist_sq: f64, reach: f64, skin: f64) -> u16 {
+    let gap = dist_sq.sqrt() - reach;
+    if gap > 0.0 && skin > 0.0 {
+        (gap / skin * GAP_UNITS).floor().min(GAP_UNITS) as u16
+    } else {
+        0
     }
 }
 
@@ -81,7 +133,7 @@ pub fn update_neighbour_list(
     mut list: ResMut<NeighbourList>,
 ) {
     let s = &*snapshot;
-    if !list.stale(s) {
+    if !list.bypass_change_detection().stale(s) {
         return;
     }
     let skin = SKIN_FRACTION * 2.0 * s.max_radius;
@@ -93,45 +145,54 @@ pub fn update_neighbour_list(
     let chunks = n.div_ceil(CHUNK);
     let list = &mut *list;
     if list.chunks.len() < chunks {
-        list.chunks.resize_with(chunks, Vec::new);
+        list.chunks.resize_with(chunks, CandidateChunk::default);
     }
     list.chunks.truncate(chunks);
     list.chunks
         .par_iter_mut()
         .enumerate()
         .for_each(|(chunk, out)| {
-            out.clear();
+            out.first.clear();
+            out.partner.clear();
+            out.gap.clear();
+            let mut pairs: Vec<(u32, u16)> = Vec::new();
             for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
+                out.first.push(out.partner.len() as u32);
+                pairs.clear();
                 let p = s.position[i];
                 let r = s.radius[i];
                 let c = grid.coords(p);
                 if let Some(b) = &s.periodic
                     && let Some(shear) = &b.shear
                 {
-                    sheared_candidates(s, grid, b, shear, i, c, range + skin, out);
-                    continue;
-                }
-                let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
-                for &cz in zs.cells() {
-                    for &cy in ys.cells() {
-                        for &cx in xs.cells() {
-                            for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
-                                if (j as usize) <= i {
-                                    continue;
-                                }
-                                let reach = r + s.radius[j as usize] + range + skin;
-                                let d = s.separation(p, s.position[j as usize]);
-                                if d.length_squared() < reach * reach {
-                                    out.push((i as u32, j));
+                    sheared_candidates(s, grid, b, shear, i, c, range, skin, &mut pairs);
+                } else {
+                    let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
+                    for &cz in zs.cells() {
+                        for &cy in ys.cells() {
+                            for &cx in xs.cells() {
+                                for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
+                                    if (j as usize) <= i {
+                                        continue;
+                                    }
+                                    let reach = r + s.radius[j as usize] + range;
+                                    let d = s.separation(p, s.position[j as usize]);
+                                    let dist_sq = d.length_squared();
+                                    if dist_sq < (reach + skin) * (reach + skin) {
+                                        pairs.push((j, gap_quanta(dist_sq, reach, skin)));
+                                    }
                                 }
                             }
                         }
                     }
                 }
+                // Each grain's partners in increasing order, so that the touching pairs
+                // come out in a fixed order.
+                pairs.sort_unstable_by_key(|&(j, _)| j);
+                out.partner.extend(pairs.iter().map(|&(j, _)| j));
+                out.gap.extend(pairs.iter().map(|&(_, g)| g));
             }
-            // Within a chunk, keep the pairs of each grain in increasing partner order, so
-            // that the touching pairs come out in a fixed order.
-            out.sort_unstable();
+            out.first.push(out.partner.len() as u32);
         });
     list.reference.clear();
     list.reference.extend_from_slice(&s.position);
@@ -141,11 +202,12 @@ pub fn update_neighbour_list(
         .and_then(|b| b.shear)
         .map_or(0.0, |shear| shear.offset);
     list.builds += 1;
+    list.closing = 0.0;
 }
 
-/// Candidate partners j > i of grain `i` (in cell `c`) in a Lees–Edwards box: the plain
-/// stencil along the third axis and the gradient axis, and along the flow axis the cells
-/// of [`CellGrid::sheared_flow_cells`], which follow the shifted seam.
+/// Candidate partners j > i of grain `i` (in cell `c`) in a Lees–Edwards box, with their
+/// gaps: the plain stencil along the third axis and the gradient axis, and along the flow
+/// axis the cells of [`CellGrid::sheared_flow_cells`], which follow the shifted seam.
 #[allow(clippy::too_many_arguments)]
 fn sheared_candidates(
     s: &GrainSnapshot,
@@ -154,8 +216,9 @@ fn sheared_candidates(
     shear: &LeesEdwards,
     i: usize,
     c: [usize; 3],
-    extra: f64,
-    out: &mut Vec<(u32, u32)>,
+    range: f64,
+    skin: f64,
+    out: &mut Vec<(u32, u16)>,
 ) {
     let (g, f) = (shear.gradient, shear.flow);
     let third = 3 - g - f;
@@ -175,10 +238,10 @@ fn sheared_candidates(
                     if (j as usize) <= i {
                         continue;
                     }
-                    let reach = r + s.radius[j as usize] + extra;
-                    let d = s.separation(p, s.position[j as usize]);
-                    if d.length_squared() < reach * reach {
-                        out.push((i as u32, j));
+                    let reach = r + s.radius[j as usize] + range;
+                    let dist_sq = s.separation(p, s.position[j as usize]).length_squared();
+                    if dist_sq < (reach + skin) * (reach + skin) {
+                        out.push((j, gap_quanta(dist_sq, reach, skin)));
                     }
                 }
             }

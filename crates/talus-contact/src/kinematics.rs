@@ -85,7 +85,11 @@ impl ContactKinematics {
         // Across a Lees–Edwards seam b's nearest image moves faster than b itself.
         let (d, image_velocity) = s.separation_and_image_velocity(s.position[i], s.position[j]);
         let dist = d.length();
-        let normal = if dist > 0.0 { d / dist } else { DVec3::Z };
+        let normal = if dist > 0.0 {
+            d * (1.0 / dist)
+        } else {
+            DVec3::Z
+        };
         let overlap = ra + rb - dist;
         let branch_a = -normal * (ra - 0.5 * overlap);
         let branch_b = normal * (rb - 0.5 * overlap);
@@ -94,7 +98,7 @@ impl ContactKinematics {
         let relative_velocity = (s.velocity[i] + wa.cross(branch_a))
             - (s.velocity[j] + image_velocity + wb.cross(branch_b));
         let normal_velocity = relative_velocity.dot(normal);
-        let (ma, mb) = (s.mass[i], s.mass[j]);
+        let (inverse_ma, inverse_mb) = (s.inverse_mass[i], s.inverse_mass[j]);
         Self {
             normal,
             overlap,
@@ -108,8 +112,8 @@ impl ContactKinematics {
             previous_overlap: 0.0,
             previous_normal: DVec3::ZERO,
             relative_omega: wa - wb,
-            // Written as a harmonic sum so that a frozen (infinite-mass) partner gives m_a.
-            effective_mass: 1.0 / (1.0 / ma + 1.0 / mb),
+            // A harmonic sum, so that a frozen partner (zero inverse mass) gives m_a.
+            effective_mass: 1.0 / (inverse_ma + inverse_mb),
             effective_radius: ra * rb / (ra + rb),
             min_radius: ra.min(rb),
         }
@@ -140,7 +144,7 @@ impl ContactKinematics {
             previous_overlap: 0.0,
             previous_normal: DVec3::ZERO,
             relative_omega: wa,
-            effective_mass: s.mass[i],
+            effective_mass: 1.0 / s.inverse_mass[i],
             effective_radius: ra,
             min_radius: ra,
         }

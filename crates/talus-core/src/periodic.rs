@@ -91,12 +91,34 @@ impl PeriodicBox {
         (d, image_velocity)
     }
 
+    /// The nearest-image rule of an unsheared box with its lengths precomputed, for the
+    /// hot loops (`None` for a sheared box, whose seam needs [`Self::min_image_with_velocity`]).
+    pub fn nearest_image(&self) -> Option<NearestImage> {
+        if self.shear.is_some() {
+            return None;
+        }
+        let l = self.length();
+        let axis = |a: usize| {
+            if self.axes[a] {
+                (l[a], 0.5 * l[a])
+            } else {
+                (0.0, f64::INFINITY)
+            }
+        };
+        let [(lx, hx), (ly, hy), (lz, hz)] = [0, 1, 2].map(axis);
+        Some(NearestImage {
+            length: DVec3::new(lx, ly, lz),
+            half: DVec3::new(hx, hy, hz),
+        })
+    }
+
     /// The image of a position inside the box along the periodic axes.
     #[inline]
     pub fn wrap(&self, mut p: DVec3) -> DVec3 {
         let l = self.length();
         for a in 0..3 {
-            if self.axes[a] {
+            // Most grains are inside the box: they stay exactly where they are.
+            if self.axes[a] && !(p[a] >= self.lo[a] && p[a] < self.hi[a]) {
                 let mut x = p[a] - self.lo[a];
                 x -= l[a] * (x / l[a]).floor();
                 // Rounding can land exactly on the upper face; that point is the lower one.
@@ -163,6 +185,37 @@ impl PeriodicBox {
     }
 }
 
+/// The nearest-image rule of an unsheared periodic box, with the box lengths and half
+/// lengths precomputed and no branch per axis: what the hot loops apply to every
+/// candidate pair ([`PeriodicBox::nearest_image`]). The default is no periodic axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NearestImage {
+    /// Box length along each periodic axis, 0 along the others, m.
+    length: DVec3,
+    /// Half the box length along each periodic axis, infinite along the others, m.
+    half: DVec3,
+}
+
+impl Default for NearestImage {
+    fn default() -> Self {
+        Self {
+            length: DVec3::ZERO,
+            half: DVec3::INFINITY,
+        }
+    }
+}
+
+impl NearestImage {
+    /// The nearest image of a separation between two wrapped positions: the same as
+    /// [`PeriodicBox::min_image`], bit for bit (one box length subtracted where a
+    /// component exceeds half the box, added where it is below minus half).
+    #[inline]
+    pub fn apply(&self, d: DVec3) -> DVec3 {
+        let down = DVec3::select(d.cmplt(-self.half), -self.length, DVec3::ZERO);
+        d - DVec3::select(d.cmpgt(self.half), self.length, down)
+    }
+}
+
 /// Wraps grain positions back into the periodic box after the drift.
 pub fn wrap_positions(periodic: Res<PeriodicBox>, mut grains: Query<&mut Position, With<Grain>>) {
     let b = *periodic;
@@ -222,6 +275,22 @@ mod tests {
         assert_eq!(w, DVec3::new(0.0, -1.0, 0.0));
         let tiny = b.wrap(DVec3::new(-1e-18, 0.0, 0.0));
         assert!(tiny.x >= 0.0 && tiny.x < 1.0);
+        // The precomputed rule agrees with the general one, bit for bit, on either side
+        // of every half length and on the non-periodic axis.
+        let fast = b.nearest_image().expect("an unsheared box");
+        for d in [
+            DVec3::new(0.9, 1.5, 4.0),
+            DVec3::new(-0.9, -1.5, -4.0),
+            DVec3::new(0.5, 1.0, 0.0),
+            DVec3::new(-0.5, -1.0, -0.0),
+            DVec3::new(0.49, -0.99, 2.6),
+        ] {
+            assert_eq!(fast.apply(d), b.min_image(d), "{d:?}");
+        }
+        assert_eq!(
+            NearestImage::default().apply(DVec3::new(7.0, -8.0, 9.0)),
+            DVec3::new(7.0, -8.0, 9.0)
+        );
     }
 
     /// The sliding-brick geometry: the image of b one box up sits at b + L_g e_g + Δ e_f

@@ -42,8 +42,9 @@ pub struct GrainSnapshot {
     pub omega: Vec<DVec3>,
     /// Radii.
     pub radius: Vec<f64>,
-    /// Masses.
-    pub mass: Vec<f64>,
+    /// Inverse masses 1/m (0 for a frozen grain): the reduced mass of a pair is
+    /// 1/(1/m_a + 1/m_b), one division instead of three.
+    pub inverse_mass: Vec<f64>,
     /// Material ids.
     pub material: Vec<u16>,
     /// Dense index of each grain, indexed by `Entity::index_u32()`; [`NO_INDEX`] elsewhere.
@@ -57,7 +58,11 @@ pub struct GrainSnapshot {
     /// it is the same.
     pub layout: u32,
     /// The periodic box, when the scene has one: pair separations take its nearest image.
+    /// Set it with [`Self::set_periodic`], which also sets the precomputed rule.
     pub periodic: Option<crate::periodic::PeriodicBox>,
+    /// The nearest-image rule of `periodic` when it is not sheared (no periodic axis
+    /// otherwise): [`Self::separation`] applies it to every candidate pair.
+    image: crate::periodic::NearestImage,
 }
 
 impl GrainSnapshot {
@@ -78,12 +83,18 @@ impl GrainSnapshot {
         (i != NO_INDEX && self.entity[i as usize] == entity).then_some(i as usize)
     }
 
+    /// Sets the periodic box (or none) and its precomputed nearest-image rule.
+    pub fn set_periodic(&mut self, periodic: Option<crate::periodic::PeriodicBox>) {
+        self.periodic = periodic;
+        self.image = periodic.and_then(|b| b.nearest_image()).unwrap_or_default();
+    }
+
     /// Separation p_a − p_b of two positions, the nearest image in a periodic box.
     #[inline]
     pub fn separation(&self, a: DVec3, b: DVec3) -> DVec3 {
         match &self.periodic {
-            Some(box_) => box_.min_image(a - b),
-            None => a - b,
+            Some(box_) if box_.shear.is_some() => box_.min_image(a - b),
+            _ => self.image.apply(a - b),
         }
     }
 
@@ -93,8 +104,8 @@ impl GrainSnapshot {
     #[inline]
     pub fn separation_and_image_velocity(&self, a: DVec3, b: DVec3) -> (DVec3, DVec3) {
         match &self.periodic {
-            Some(box_) => box_.min_image_with_velocity(a - b),
-            None => (a - b, DVec3::ZERO),
+            Some(box_) if box_.shear.is_some() => box_.min_image_with_velocity(a - b),
+            _ => (self.image.apply(a - b), DVec3::ZERO),
         }
     }
 
@@ -108,7 +119,7 @@ impl GrainSnapshot {
 const COPY_CHUNK: usize = 4096;
 
 /// Copies one component's values into a snapshot array, in parallel chunks.
-fn copy_vectors<T: Sync>(dst: &mut [DVec3], src: &[T], value: impl Fn(&T) -> DVec3 + Sync) {
+fn copy_column<T: Sync, U: Send>(dst: &mut [U], src: &[T], value: impl Fn(&T) -> U + Sync) {
     dst.par_iter_mut()
         .with_min_len(COPY_CHUNK)
         .zip(src.par_iter())
@@ -136,7 +147,7 @@ pub fn gather_snapshot(
     frozen: Query<Entity, (With<Grain>, With<Frozen>)>,
 ) {
     let s = &mut *snapshot;
-    s.periodic = periodic.map(|p| *p);
+    s.set_periodic(periodic.map(|p| *p));
     let n: usize = grains
         .contiguous_iter()
         .expect("grain query is dense")
@@ -148,7 +159,7 @@ pub fn gather_snapshot(
     s.velocity.resize(n, DVec3::ZERO);
     s.omega.resize(n, DVec3::ZERO);
     s.radius.resize(n, 0.0);
-    s.mass.resize(n, 0.0);
+    s.inverse_mass.resize(n, 0.0);
     s.material.resize(n, 0);
     // Each table's slice of every array is filled in parallel (plain copies: the result
     // does not depend on the thread count).
@@ -165,26 +176,37 @@ pub fn gather_snapshot(
             &mut s.velocity[range.clone()],
             &mut s.omega[range.clone()],
         );
+        let (radius, inverse_mass, material) = (
+            &mut s.radius[range.clone()],
+            &mut s.inverse_mass[range.clone()],
+            &mut s.material[range],
+        );
         rayon::join(
-            || copy_vectors(position, p, |x| x.0),
             || {
                 rayon::join(
-                    || copy_vectors(velocity, v, |x| x.0),
-                    || copy_vectors(omega, w, |x| x.0),
+                    || copy_column(position, p, |x| x.0),
+                    || copy_column(velocity, v, |x| x.0),
+                )
+            },
+            || {
+                rayon::join(
+                    || copy_column(omega, w, |x| x.0),
+                    || {
+                        copy_column(radius, r, |x| x.0);
+                        copy_column(inverse_mass, m, |x| 1.0 / x.0);
+                        copy_column(material, mat, |x| x.0);
+                    },
                 )
             },
         );
-        for (d, x) in s.radius[range.clone()].iter_mut().zip(r) {
-            *d = x.0;
-        }
-        for (d, x) in s.mass[range.clone()].iter_mut().zip(m) {
-            *d = x.0;
-        }
-        for (d, x) in s.material[range].iter_mut().zip(mat) {
-            *d = x.0;
-        }
     }
-    s.max_radius = s.radius.iter().copied().fold(0.0, f64::max);
+    // A maximum: the same on any number of threads.
+    s.max_radius = s
+        .radius
+        .par_iter()
+        .with_min_len(COPY_CHUNK)
+        .copied()
+        .reduce(|| 0.0, f64::max);
     if reordered {
         let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
         s.dense_of.clear();
@@ -193,11 +215,11 @@ pub fn gather_snapshot(
             s.dense_of[e.index_u32() as usize] = i as u32;
         }
     }
-    // A frozen grain resists like an infinite mass: a contact's reduced mass is then the
-    // moving grain's own (as LAMMPS does for frozen atoms).
+    // A frozen grain resists like an infinite mass (a zero inverse): a contact's reduced
+    // mass is then the moving grain's own (as LAMMPS does for frozen atoms).
     for e in &frozen {
         if let Some(i) = s.dense(e) {
-            s.mass[i] = f64::INFINITY;
+            s.inverse_mass[i] = 0.0;
         }
     }
     let walls_changed = s.walls.len() != walls.iter().len()
