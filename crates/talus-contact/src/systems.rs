@@ -137,9 +137,13 @@ pub fn evaluate_law<L: ContactLaw>(
             torque_b: kin.branch_b.cross(-r.force) + r.torque_b,
         };
         sums.active += usize::from(f.is_active(g));
-        let ratio = kin.overlap / kin.min_radius;
-        if ratio > sums.worst_overlap.0 {
-            sums.worst_overlap = (ratio, Some((c.a, c.b)));
+        // Divide only for an overlap that may be the worst so far (a division per contact
+        // is a tenth of the loop's latency).
+        if kin.overlap > sums.worst_overlap.0 * kin.min_radius {
+            let ratio = kin.overlap / kin.min_radius;
+            if ratio > sums.worst_overlap.0 {
+                sums.worst_overlap = (ratio, Some((c.a, c.b)));
+            }
         }
         sums.elastic += r.elastic_energy;
         // The integrator turns the old force with the old branch vectors and the new force

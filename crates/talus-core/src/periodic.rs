@@ -209,7 +209,7 @@ impl NearestImage {
     /// The nearest image of a separation between two wrapped positions: the same as
     /// [`PeriodicBox::min_image`], bit for bit (one box length subtracted where a
     /// component exceeds half the box, added where it is below minus half).
-    #[inline]
+    #[inline(always)]
     pub fn apply(&self, d: DVec3) -> DVec3 {
         let down = DVec3::select(d.cmplt(-self.half), -self.length, DVec3::ZERO);
         d - DVec3::select(d.cmpgt(self.half), self.length, down)

@@ -90,7 +90,9 @@ impl GrainSnapshot {
     }
 
     /// Separation p_a − p_b of two positions, the nearest image in a periodic box.
-    #[inline]
+    // Always inlined: it runs for every candidate pair and every grain's staleness check,
+    // and a call costs as much as the arithmetic.
+    #[inline(always)]
     pub fn separation(&self, a: DVec3, b: DVec3) -> DVec3 {
         match &self.periodic {
             Some(box_) if box_.shear.is_some() => box_.min_image(a - b),

@@ -305,7 +305,9 @@ pub fn normal_spring_release(k: f64, old: DVec3, kin: &ContactKinematics) -> (f6
 /// makes the spring's trapezoidal work match the change of ½k_t|ξ|² to third order per
 /// step; rotating first and adding after (LAMMPS's order) leaves a second-order error per
 /// step, first order over a contact.
-#[inline]
+// Always inlined into the force loop: the kinematics it reads then stay in registers,
+// and the fields no law reads are never computed.
+#[inline(always)]
 pub fn advance_tangential_spring(spring: DVec3, kin: &ContactKinematics) -> DVec3 {
     let n = kin.normal;
     let previous = kin.previous_normal;
