@@ -11,7 +11,7 @@ use talus_contact::{
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
-use crate::neighbours::{CHUNK, NeighbourList};
+use crate::neighbours::{CHUNK, CandidateChunk, NeighbourList};
 
 /// The live contacts entered under one grain.
 type GrainContacts = SmallVec<[IndexEntry; 2]>;
@@ -219,74 +219,15 @@ fn update_contacts_inner(
         .zip(ended[..chunks].par_iter_mut())
         .enumerate()
         .for_each(|(chunk, (((entries, candidates), new), gone))| {
-            let base = chunk * CHUNK;
-            new.clear();
-            gone.clear();
-            let mut touching = |i: usize, partner: u32, material_b: u16| {
-                let list = &mut entries[i - base];
-                if let Some(entry) = list.iter_mut().find(|e| e.partner == partner) {
-                    entry.seen = pass;
-                } else if table.get(s.material[i], material_b).is_some() {
-                    new.push((i as u32, partner));
-                }
+            let pass_state = PassState {
+                s,
+                table,
+                view,
+                pass,
+                range,
+                gap_threshold,
             };
-            for i in base..(base + CHUNK).min(n) {
-                let p = s.position[i];
-                let r = s.radius[i];
-                // A frozen grain has an infinite mass (zero inverse) in the snapshot. A contact between
-                // two frozen grains, or a frozen grain and a wall, moves nothing, and its
-                // reduced mass (hence a mass-scaled dashpot) would be infinite: none is made.
-                let frozen = s.inverse_mass[i] == 0.0;
-                let k = i - base;
-                let rows = candidates.first[k] as usize..candidates.first[k + 1] as usize;
-                for (&j, &gap) in candidates.partner[rows.clone()]
-                    .iter()
-                    .zip(&candidates.gap[rows])
-                {
-                    // Too far at the build to have come within reach since.
-                    if gap > gap_threshold {
-                        continue;
-                    }
-                    let j = j as usize;
-                    if frozen && s.inverse_mass[j] == 0.0 {
-                        continue;
-                    }
-                    let reach = r + s.radius[j] + range;
-                    if s.separation(p, s.position[j]).length_squared() < reach * reach {
-                        touching(i, j as u32, s.material[j]);
-                    }
-                }
-                if frozen {
-                    continue;
-                }
-                for (w, wall) in s.walls.iter().enumerate() {
-                    if (p - wall.point).dot(wall.normal) < r + range {
-                        touching(i, ContactBodies::wall_code(w), wall.material);
-                    }
-                }
-            }
-            for list in entries.iter_mut() {
-                // Most grains' contacts were all found again: nothing to drop.
-                if list.iter().all(|e| e.seen == pass) {
-                    continue;
-                }
-                list.retain(|e| {
-                    if e.seen == pass {
-                        return true;
-                    }
-                    // A pair that stopped touching keeps its contact for one more
-                    // evaluation (with no force), so that the law books the work done in
-                    // the step in which the contact ended; it goes at the next pass.
-                    let acted = view
-                        .get::<ContactGeometry>(e.contact)
-                        .zip(view.get::<ContactForce>(e.contact))
-                        .is_some_and(|(g, f)| f.is_active(g));
-                    if !acted {
-                        gone.push(e.contact);
-                    }
-                    acted
-                });
-            }
+            narrow_chunk(&pass_state, chunk * CHUNK, entries, candidates, new, gone);
         });
     // Ended contacts go first, so that the new ones take their freed rows and entity
     // slots instead of growing the table and the entity list (both double their
@@ -333,6 +274,106 @@ fn update_contacts_inner(
             partner: j,
             seen: pass,
             contact,
+        });
+    }
+}
+
+/// What every chunk of the narrow phase's parallel pass reads.
+struct PassState<'a> {
+    s: &'a GrainSnapshot,
+    table: &'a ContactLawTable,
+    view: &'a World,
+    pass: u32,
+    range: f64,
+    gap_threshold: u16,
+}
+
+/// The narrow phase on one chunk of grains (first grain `base`): tests its candidate
+/// pairs and walls for touch, stamps the live contacts found again, lists the new pairs
+/// in `new` and the ended contacts in `gone`. Not inlined, so that profiles show it.
+#[inline(never)]
+fn narrow_chunk(
+    state: &PassState,
+    base: usize,
+    entries: &mut [GrainContacts],
+    candidates: &CandidateChunk,
+    new: &mut Vec<(u32, u32)>,
+    gone: &mut Vec<Entity>,
+) {
+    let PassState {
+        s,
+        table,
+        view,
+        pass,
+        range,
+        gap_threshold,
+    } = *state;
+    let n = s.len();
+    new.clear();
+    gone.clear();
+    let mut touching = |i: usize, partner: u32, material_b: u16| {
+        let list = &mut entries[i - base];
+        if let Some(entry) = list.iter_mut().find(|e| e.partner == partner) {
+            entry.seen = pass;
+        } else if table.get(s.material[i], material_b).is_some() {
+            new.push((i as u32, partner));
+        }
+    };
+    for i in base..(base + CHUNK).min(n) {
+        let p = s.position[i];
+        let r = s.radius[i];
+        // A frozen grain has an infinite mass (zero inverse) in the snapshot. A contact between
+        // two frozen grains, or a frozen grain and a wall, moves nothing, and its
+        // reduced mass (hence a mass-scaled dashpot) would be infinite: none is made.
+        let frozen = s.inverse_mass[i] == 0.0;
+        let k = i - base;
+        let rows = candidates.first[k] as usize..candidates.first[k + 1] as usize;
+        for (&j, &gap) in candidates.partner[rows.clone()]
+            .iter()
+            .zip(&candidates.gap[rows])
+        {
+            // Too far at the build to have come within reach since.
+            if gap > gap_threshold {
+                continue;
+            }
+            let j = j as usize;
+            if frozen && s.inverse_mass[j] == 0.0 {
+                continue;
+            }
+            let reach = r + s.radius[j] + range;
+            if s.separation(p, s.position[j]).length_squared() < reach * reach {
+                touching(i, j as u32, s.material[j]);
+            }
+        }
+        if frozen {
+            continue;
+        }
+        for (w, wall) in s.walls.iter().enumerate() {
+            if (p - wall.point).dot(wall.normal) < r + range {
+                touching(i, ContactBodies::wall_code(w), wall.material);
+            }
+        }
+    }
+    for list in entries.iter_mut() {
+        // Most grains' contacts were all found again: nothing to drop.
+        if list.iter().all(|e| e.seen == pass) {
+            continue;
+        }
+        list.retain(|e| {
+            if e.seen == pass {
+                return true;
+            }
+            // A pair that stopped touching keeps its contact for one more
+            // evaluation (with no force), so that the law books the work done in
+            // the step in which the contact ended; it goes at the next pass.
+            let acted = view
+                .get::<ContactGeometry>(e.contact)
+                .zip(view.get::<ContactForce>(e.contact))
+                .is_some_and(|(g, f)| f.is_active(g));
+            if !acted {
+                gone.push(e.contact);
+            }
+            acted
         });
     }
 }
