@@ -102,3 +102,17 @@ fn rebuilding_the_neighbour_list_every_step_changes_nothing_in_a_periodic_flow()
     };
     assert_same("chute", chute(false), chute(true));
 }
+
+/// A gas sheared by Lees–Edwards boundaries (flow x, gradient z, the images across the z
+/// seam sliding at 1 m/s): the moving image offset counts against the skin, and the gap
+/// skip must allow for it.
+#[test]
+fn rebuilding_the_neighbour_list_every_step_changes_nothing_in_a_sheared_gas() {
+    let shear = ",\n        shear: (rate: 5e1, flow: \"x\", gradient: \"z\")";
+    let scene = common::glass_gas("sheared-rebuild", 1500, 0.02, shear, "");
+    let gas = |rebuild_every_step: bool| {
+        let (sim, steps) = common::build(&scene);
+        run_sim(sim, steps, rebuild_every_step)
+    };
+    assert_same("sheared gas", gas(false), gas(true));
+}

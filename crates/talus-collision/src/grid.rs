@@ -74,8 +74,8 @@ impl CellGrid {
         }
         // Edge ≥ 2 R_max + r_c so that touching grains are never more than one cell apart.
         let edge = (2.0 * s.max_radius + self.interaction_range + margin).max(1e-12) * (1.0 + 1e-9);
-        self.periodic = s.periodic.map_or([false; 3], |b| b.axes);
-        if let Some(b) = &s.periodic {
+        self.periodic = s.periodic().map_or([false; 3], |b| b.axes);
+        if let Some(b) = s.periodic() {
             for a in 0..3 {
                 if b.axes[a] {
                     lo[a] = b.lo[a];

@@ -24,13 +24,13 @@ pub const SKIN_FRACTION: f64 = 0.1;
 #[derive(Default, Clone, Debug)]
 pub struct CandidateChunk {
     /// Where each grain's partners start in `partner`, plus one final entry.
-    pub first: Vec<u32>,
+    pub(crate) first: Vec<u32>,
     /// Candidate partners.
-    pub partner: Vec<u32>,
+    pub(crate) partner: Vec<u32>,
     /// Each candidate's gap at the build (distance less the reach of the pair), in units
     /// of [`GAP_UNITS`] per skin, rounded down, 0 for pairs already within reach: a pair
     /// cannot be within reach while twice the largest move since the build is below its gap.
-    pub gap: Vec<u16>,
+    pub(crate) gap: Vec<u16>,
 }
 
 /// Gap quanta per skin in [`CandidateChunk::gap`].
@@ -74,7 +74,7 @@ impl NeighbourList {
         // Across a Lees–Edwards seam a pair's separation also changes with the image
         // offset: exact as long as 2 × (largest move) + |change of Δ| stays within the skin.
         let mut shift = 0.0;
-        if let Some(b) = &s.periodic
+        if let Some(b) = s.periodic()
             && let Some(shear) = &b.shear
         {
             let lf = b.length()[shear.flow];
@@ -162,7 +162,7 @@ pub fn update_neighbour_list(
                 let p = s.position[i];
                 let r = s.radius[i];
                 let c = grid.coords(p);
-                if let Some(b) = &s.periodic
+                if let Some(b) = s.periodic()
                     && let Some(shear) = &b.shear
                 {
                     sheared_candidates(s, grid, b, shear, i, c, range, skin, &mut pairs);
@@ -198,7 +198,7 @@ pub fn update_neighbour_list(
     list.reference.extend_from_slice(&s.position);
     list.layout = s.layout;
     list.offset = s
-        .periodic
+        .periodic()
         .and_then(|b| b.shear)
         .map_or(0.0, |shear| shear.offset);
     list.builds += 1;

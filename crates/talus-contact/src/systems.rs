@@ -138,8 +138,9 @@ pub fn evaluate_law<L: ContactLaw>(
         };
         sums.active += usize::from(f.is_active(g));
         // Divide only for an overlap that may be the worst so far (a division per contact
-        // is a tenth of the loop's latency).
-        if kin.overlap > sums.worst_overlap.0 * kin.min_radius {
+        // is a tenth of the loop's latency). `>=`, not `>`: whenever the ratio exceeds the
+        // worst, the rounded product cannot exceed the overlap, so no candidate is missed.
+        if kin.overlap >= sums.worst_overlap.0 * kin.min_radius {
             let ratio = kin.overlap / kin.min_radius;
             if ratio > sums.worst_overlap.0 {
                 sums.worst_overlap = (ratio, Some((c.a, c.b)));

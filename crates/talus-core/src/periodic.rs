@@ -278,14 +278,18 @@ mod tests {
         // The precomputed rule agrees with the general one, bit for bit, on either side
         // of every half length and on the non-periodic axis.
         let fast = b.nearest_image().expect("an unsheared box");
+        let bits = |v: DVec3| v.to_array().map(f64::to_bits);
         for d in [
             DVec3::new(0.9, 1.5, 4.0),
             DVec3::new(-0.9, -1.5, -4.0),
             DVec3::new(0.5, 1.0, 0.0),
             DVec3::new(-0.5, -1.0, -0.0),
+            DVec3::new(-0.0, -0.0, -0.0),
             DVec3::new(0.49, -0.99, 2.6),
+            DVec3::new(f64::NAN, f64::INFINITY, f64::NEG_INFINITY),
+            DVec3::new(f64::NEG_INFINITY, f64::NAN, f64::INFINITY),
         ] {
-            assert_eq!(fast.apply(d), b.min_image(d), "{d:?}");
+            assert_eq!(bits(fast.apply(d)), bits(b.min_image(d)), "{d:?}");
         }
         assert_eq!(
             NearestImage::default().apply(DVec3::new(7.0, -8.0, 9.0)),

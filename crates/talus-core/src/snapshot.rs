@@ -58,8 +58,8 @@ pub struct GrainSnapshot {
     /// it is the same.
     pub layout: u32,
     /// The periodic box, when the scene has one: pair separations take its nearest image.
-    /// Set it with [`Self::set_periodic`], which also sets the precomputed rule.
-    pub periodic: Option<crate::periodic::PeriodicBox>,
+    /// Private so that it changes only with its precomputed rule ([`Self::set_periodic`]).
+    periodic: Option<crate::periodic::PeriodicBox>,
     /// The nearest-image rule of `periodic` when it is not sheared (no periodic axis
     /// otherwise): [`Self::separation`] applies it to every candidate pair.
     image: crate::periodic::NearestImage,
@@ -81,6 +81,12 @@ impl GrainSnapshot {
     pub fn dense(&self, entity: Entity) -> Option<usize> {
         let i = *self.dense_of.get(entity.index_u32() as usize)?;
         (i != NO_INDEX && self.entity[i as usize] == entity).then_some(i as usize)
+    }
+
+    /// The periodic box, when the scene has one.
+    #[inline]
+    pub fn periodic(&self) -> Option<&crate::periodic::PeriodicBox> {
+        self.periodic.as_ref()
     }
 
     /// Sets the periodic box (or none) and its precomputed nearest-image rule.

@@ -339,14 +339,14 @@ pub fn sample_fields(
             grain_max,
             dims,
         },
-        snapshot.periodic.as_ref(),
+        snapshot.periodic(),
     );
     let mut cells = spec.cells.map(|c| c.max(1));
     if dims == 2 {
         cells[2] = 1;
     }
-    let periodic = snapshot.periodic.map_or([false; 3], |b| b.axes);
-    let shear = Seams::of(snapshot.periodic.as_ref()).shear;
+    let periodic = snapshot.periodic().map_or([false; 3], |b| b.axes);
+    let shear = Seams::of(snapshot.periodic()).shear;
     // The velocity of the image one period up the gradient axis beyond the grain's own,
     // γ̇ L_g e_f (zero without shear).
     let image_velocity = shear.map_or(DVec3::ZERO, |s| {

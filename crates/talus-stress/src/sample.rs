@@ -257,9 +257,9 @@ pub fn sample_stress(
             grain_max,
             dims,
         },
-        snapshot.periodic.as_ref(),
+        snapshot.periodic(),
     );
-    let seams = Seams::of(snapshot.periodic.as_ref());
+    let seams = Seams::of(snapshot.periodic());
 
     let sums = &mut scratch.sums;
     sums.clear();
@@ -310,7 +310,7 @@ pub fn sample_stress(
     // Under Lees–Edwards shear the kinetic stress takes the peculiar velocity: less the
     // streaming profile γ̇ (x_g − c_g) e_f, i.e. (the profile being linear) less the
     // region's mean and γ̇ (x_g − x̄_g) e_f.
-    let shear = snapshot.periodic.and_then(|b| b.shear);
+    let shear = snapshot.periodic().and_then(|b| b.shear);
     // Second pass: fluctuations about the mean (two passes, not Σ m v v − M v̄ v̄, so
     // that a fast-moving region keeps its small fluctuations to full precision).
     for (p, v, _, m, _) in &grains {
