@@ -6,7 +6,7 @@ use std::any::Any;
 use std::path::Path;
 
 use glam::DVec3;
-use talus_collision::CollisionPlugin;
+use talus_collision::{CellGrid, CollisionPlugin};
 use talus_contact::{
     ContactPlugin, LawDescriptor, LawRegistry, PairAssignment, ParamValues, TimeScale, check_params,
 };
@@ -2026,10 +2026,10 @@ fn check_overlaps_across_seams(
 }
 
 /// Calls `visit(i, j)` once for every pair i < j of `points` that may lie within `reach`
-/// of each other: those in the same or adjacent cells of a grid at least `reach` wide,
-/// which wraps around the periodic axes of `periodic` (adjacent through the seams), in a
-/// fixed order; stops at the first error. The cells grow when they would outnumber the
-/// points eightfold, so a point flung far away costs no memory.
+/// of each other, in a fixed order; stops at the first error. The candidates come from the
+/// broad phase's own cell grid ([`CellGrid`]: cells at least `reach` wide, wrapping around
+/// the periodic axes of `periodic`, their number bounded so that a point flung far away
+/// costs no memory). Points must lie inside the box along its periodic axes.
 fn for_each_close_pair<E>(
     points: &[DVec3],
     periodic: Option<&PeriodicBox>,
@@ -2039,86 +2039,25 @@ fn for_each_close_pair<E>(
     if points.len() < 2 {
         return Ok(());
     }
-    let lo = points
-        .iter()
-        .fold(DVec3::splat(f64::INFINITY), |a, p| a.min(*p));
-    let hi = points
-        .iter()
-        .fold(DVec3::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
-    let wraps = |a: usize| periodic.is_some_and(|b| b.axes[a]);
-    let max_cells = (8 * points.len()).max(4096);
-    let mut edge = reach.max(f64::MIN_POSITIVE);
-    let (dims, size, origin) = loop {
-        let mut dims = [1usize; 3];
-        let mut size = [edge; 3];
-        let mut origin = [0.0; 3];
-        for a in 0..3 {
-            match periodic.filter(|b| b.axes[a]) {
-                Some(b) => {
-                    // A whole number of cells, each at least `edge` long, so the grid wraps.
-                    let length = b.hi[a] - b.lo[a];
-                    dims[a] = ((length / edge).floor() as usize).max(1);
-                    size[a] = length / dims[a] as f64;
-                    origin[a] = b.lo[a];
-                }
-                None => {
-                    dims[a] = ((hi[a] - lo[a]) / edge).floor() as usize + 1;
-                    origin[a] = lo[a];
-                }
-            }
-        }
-        if dims.iter().product::<usize>() <= max_cells {
-            break (dims, size, origin);
-        }
-        edge *= 1.5;
-    };
-    let coords = |p: DVec3| -> [usize; 3] {
-        std::array::from_fn(|a| {
-            let c = ((p[a] - origin[a]) / size[a]).floor() as i64;
-            if wraps(a) {
-                c.rem_euclid(dims[a] as i64) as usize
-            } else {
-                c.clamp(0, dims[a] as i64 - 1) as usize
-            }
-        })
-    };
-    let index = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
-    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); dims.iter().product()];
+    // The grid's cells are 2 R_max wide: R_max = reach / 2 makes them `reach` wide.
+    let mut s = GrainSnapshot::default();
+    s.entity = vec![Entity::PLACEHOLDER; points.len()];
+    s.position = points.to_vec();
+    s.max_radius = 0.5 * reach;
+    s.set_periodic(periodic.copied());
+    let mut grid = CellGrid::default();
+    grid.rebuild(&s);
     for (i, p) in points.iter().enumerate() {
-        bins[index(coords(*p))].push(i as u32);
-    }
-    let mut around = Vec::with_capacity(27);
-    for (i, p) in points.iter().enumerate() {
-        let c = coords(*p);
-        around.clear();
-        for dz in -1..=1_i64 {
-            for dy in -1..=1_i64 {
-                for dx in -1..=1_i64 {
-                    let near: Option<[usize; 3]> = (|| {
-                        let mut n = [0usize; 3];
-                        for (a, d) in [dx, dy, dz].into_iter().enumerate() {
-                            let m = c[a] as i64 + d;
-                            n[a] = if wraps(a) {
-                                m.rem_euclid(dims[a] as i64) as usize
-                            } else if (0..dims[a] as i64).contains(&m) {
-                                m as usize
-                            } else {
-                                return None;
-                            };
+        let c = grid.coords(*p);
+        let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
+        for &cz in zs.cells() {
+            for &cy in ys.cells() {
+                for &cx in xs.cells() {
+                    for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
+                        if j as usize > i {
+                            visit(i, j as usize)?;
                         }
-                        Some(n)
-                    })();
-                    around.extend(near.map(index));
-                }
-            }
-        }
-        // With one or two cells along a periodic axis, several offsets wrap to one cell.
-        around.sort_unstable();
-        around.dedup();
-        for &cell in &around {
-            for &j in &bins[cell] {
-                if j as usize > i {
-                    visit(i, j as usize)?;
+                    }
                 }
             }
         }
