@@ -12,6 +12,7 @@ pub mod periodic;
 pub mod resources;
 pub mod schedule;
 pub mod snapshot;
+pub mod workers;
 
 pub use glam::DVec3;
 

@@ -391,7 +391,8 @@ impl Simulation {
     }
 
     fn run_pass(&mut self) -> Result<(), BlowUp> {
-        self.schedule.run(&mut self.world);
+        let (schedule, world) = (&mut self.schedule, &mut self.world);
+        crate::workers::with_workers_polling(|| schedule.run(world));
         // Despawned contacts leave removal messages in the world until its trackers are
         // cleared (an app does it every frame): without this they pile up for the whole
         // run, about 80 bytes per grain every 100 steps of a flowing packing.
