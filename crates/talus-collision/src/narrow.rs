@@ -218,6 +218,9 @@ fn update_contacts_inner(
         .zip(new_pairs[..chunks].par_iter_mut())
         .zip(ended[..chunks].par_iter_mut())
         .enumerate()
+        // Chunks differ in cost (dense and dilute regions, the frozen base): small jobs,
+        // which idle threads steal, even the threads' shares out.
+        .with_max_len(2)
         .for_each(|(chunk, (((entries, candidates), new), gone))| {
             let pass_state = PassState {
                 s,

@@ -153,8 +153,12 @@ pub fn second_kick_translation(
 pub fn gravity(config: Res<SimConfig>, mut grains: Query<(&mut Force, &Mass), With<Grain>>) {
     let g = config.gravity;
     for (mut f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
-        for (f, m) in f.bypass_change_detection().iter_mut().zip(m.iter()) {
-            f.0 += g * m.0;
+        let f = f.bypass_change_detection();
+        let update = |(f, m): (&mut Force, &Mass)| f.0 += g * m.0;
+        if f.len() >= PARALLEL_THRESHOLD {
+            f.par_iter_mut().zip(m.par_iter()).for_each(update);
+        } else {
+            f.iter_mut().zip(m.iter()).for_each(update);
         }
     }
 }
