@@ -20,7 +20,7 @@ pub const ENERGY_CHUNK_LEN: usize = 256;
 
 /// Most force-loop chunks one parallel job takes: rayon otherwise stops splitting at
 /// about four jobs per thread, too coarse to even out chunks of unequal cost.
-const FORCE_CHUNKS_PER_JOB: usize = 4;
+const FORCE_CHUNKS_PER_JOB: usize = 1;
 
 /// How a new contact between two materials is created: by the law assigned to the pair.
 #[derive(Clone, Debug)]
@@ -333,8 +333,9 @@ pub fn apply_contact_forces(
         offset += len;
     }
     picked.resize_with(parts.len(), Vec::new);
+    let pick = rayon::current_num_threads() > 1;
     parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
-        |((first, force, torque), picked)| sum_range(&tables, first, force, torque, picked),
+        |((first, force, torque), picked)| sum_range(&tables, pick, first, force, torque, picked),
     );
     if !wall_force.is_empty() {
         for &(bodies, forces) in &tables {
@@ -392,9 +393,10 @@ pub fn apply_contact_forces(
 /// the grains `first..first + force.len()` (in snapshot order) and adds to them, in table
 /// order, the forces and torques of the contacts that touch them.
 ///
-/// First every contact's two bodies are tested against the range without a branch, each
-/// side in range appended to `picked` as `row << 1 | side` (the write always happens, the
-/// length grows by the test's 0 or 1); then only the picked sides are summed. On two or
+/// With `pick` (two or more threads), first every contact's two bodies are tested against
+/// the range without a branch, each side in range appended to `picked` as
+/// `row << 1 | side` (the write always happens, the length grows by the test's 0 or 1);
+/// then only the picked sides are summed. On two or
 /// more threads about half the contacts' bodies lie outside a thread's range in no
 /// predictable pattern (the contact table is in no spatial order), and a branch per side
 /// mispredicted on so many that this stage took as long on two threads as on one. The
@@ -402,6 +404,7 @@ pub fn apply_contact_forces(
 #[inline(never)]
 fn sum_range(
     tables: &[(&[ContactBodies], &[ContactForce])],
+    pick: bool,
     first: usize,
     force: &mut [Force],
     torque: &mut [Torque],
@@ -410,6 +413,24 @@ fn sum_range(
     let len = force.len();
     force.fill(Force(DVec3::ZERO));
     torque.fill(Torque(DVec3::ZERO));
+    if !pick {
+        // One thread: its ranges are whole tables of grains, each contact's bodies fall
+        // in the same range contact after contact, every branch is predicted, and
+        // picking would only add a pass.
+        for &(bodies, forces) in tables {
+            for (b, f) in bodies.iter().zip(forces) {
+                if let Some(i) = (b.a as usize).checked_sub(first).filter(|&i| i < len) {
+                    force[i].0 += f.force;
+                    torque[i].0 += f.torque_a;
+                }
+                if let Some(j) = (b.b as usize).checked_sub(first).filter(|&j| j < len) {
+                    force[j].0 -= f.force;
+                    torque[j].0 += f.torque_b;
+                }
+            }
+        }
+        return;
+    }
     let in_range = |body: u32| usize::from((body as usize).wrapping_sub(first) < len);
     for &(bodies, forces) in tables {
         // Two entries a contact at most, plus the one written past the last kept.
