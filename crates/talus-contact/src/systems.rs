@@ -432,34 +432,38 @@ fn sum_range(
         return;
     }
     let in_range = |body: u32| usize::from((body as usize).wrapping_sub(first) < len);
+    // Two entries a contact at most, plus the one written past the last kept; blocks of
+    // contacts keep the list small (no buffer that grows with the packing) and in cache.
+    picked.resize(2 * PICK_BLOCK + 1, 0);
     for &(bodies, forces) in tables {
-        // Two entries a contact at most, plus the one written past the last kept.
-        if picked.len() < 2 * bodies.len() + 1 {
-            picked.resize(2 * bodies.len() + 1, 0);
-        }
-        let mut count = 0;
-        for (row, b) in bodies.iter().enumerate() {
-            let code = (row as u32) << 1;
-            picked[count] = code;
-            count += in_range(b.a);
-            picked[count] = code | 1;
-            count += in_range(b.b);
-        }
-        for &code in &picked[..count] {
-            let row = (code >> 1) as usize;
-            let (b, f) = (&bodies[row], &forces[row]);
-            if code & 1 == 0 {
-                let i = b.a as usize - first;
-                force[i].0 += f.force;
-                torque[i].0 += f.torque_a;
-            } else {
-                let j = b.b as usize - first;
-                force[j].0 -= f.force;
-                torque[j].0 += f.torque_b;
+        for (bodies, forces) in bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK)) {
+            let mut count = 0;
+            for (row, b) in bodies.iter().enumerate() {
+                let code = (row as u32) << 1;
+                picked[count] = code;
+                count += in_range(b.a);
+                picked[count] = code | 1;
+                count += in_range(b.b);
+            }
+            for &code in &picked[..count] {
+                let row = (code >> 1) as usize;
+                let (b, f) = (&bodies[row], &forces[row]);
+                if code & 1 == 0 {
+                    let i = b.a as usize - first;
+                    force[i].0 += f.force;
+                    torque[i].0 += f.torque_a;
+                } else {
+                    let j = b.b as usize - first;
+                    force[j].0 -= f.force;
+                    torque[j].0 += f.torque_b;
+                }
             }
         }
     }
 }
+
+/// Contacts whose sides [`sum_range`] picks at a time.
+const PICK_BLOCK: usize = 2048;
 
 /// The unbalanced-force ratio of the packing (Yade's `unbalancedForce`): the mean size
 /// of the net force on the free grains (contacts and body forces, as summed in the
