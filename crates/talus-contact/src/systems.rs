@@ -313,8 +313,8 @@ pub fn apply_contact_forces(
     // the totals are the same bit for bit on any number of threads: the grains' force and
     // torque columns (in snapshot order) are split into one range per thread, and each
     // range's thread zeroes its range, reads every contact's body indices (written by the
-    // force loop) and adds the forces of those that touch it ([`sum_range`]). Counts, the worst overlap
-    // and the energies come summed per chunk from the force loop.
+    // force loop) and adds the forces of those that touch it ([`sum_range`]). Counts, the
+    // worst overlap and the energies come summed per chunk from the force loop.
     let tables: Vec<(&[ContactBodies], &[ContactForce])> = contacts
         .contiguous_iter()
         .expect("contact query is dense")
@@ -393,14 +393,14 @@ pub fn apply_contact_forces(
 /// the grains `first..first + force.len()` (in snapshot order) and adds to them, in table
 /// order, the forces and torques of the contacts that touch them.
 ///
-/// With `pick` (two or more threads), first every contact's two bodies are tested against
+/// With `pick` (two or more threads), every contact's two bodies are first tested against
 /// the range without a branch, each side in range appended to `picked` as
-/// `row << 1 | side` (the write always happens, the length grows by the test's 0 or 1);
-/// then only the picked sides are summed. On two or
-/// more threads about half the contacts' bodies lie outside a thread's range in no
-/// predictable pattern (the contact table is in no spatial order), and a branch per side
-/// mispredicted on so many that this stage took as long on two threads as on one. The
-/// order of the sums is that of the direct loop, bit for bit.
+/// `row << 1 | side` (the write always happens, the length grows by the test's 0 or 1),
+/// and only the picked sides are then summed. On two or more threads about half the
+/// contacts' bodies lie outside a thread's range in no predictable pattern (the contact
+/// table is in no spatial order), and a branch per side mispredicted on so many that this
+/// stage took as long on two threads as on one. On one thread every branch is predicted
+/// and picking would only add a pass. Either way the sums are taken in the same order.
 #[inline(never)]
 fn sum_range(
     tables: &[(&[ContactBodies], &[ContactForce])],
@@ -413,25 +413,32 @@ fn sum_range(
     let len = force.len();
     force.fill(Force(DVec3::ZERO));
     torque.fill(Torque(DVec3::ZERO));
+    // Adds one side of a contact; `b_side` for the second body, whose force is opposite.
+    let mut add = |b: &ContactBodies, f: &ContactForce, b_side: bool| {
+        if b_side {
+            let j = b.b as usize - first;
+            force[j].0 -= f.force;
+            torque[j].0 += f.torque_b;
+        } else {
+            let i = b.a as usize - first;
+            force[i].0 += f.force;
+            torque[i].0 += f.torque_a;
+        }
+    };
+    let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
     if !pick {
-        // One thread: its ranges are whole tables of grains, each contact's bodies fall
-        // in the same range contact after contact, every branch is predicted, and
-        // picking would only add a pass.
         for &(bodies, forces) in tables {
             for (b, f) in bodies.iter().zip(forces) {
-                if let Some(i) = (b.a as usize).checked_sub(first).filter(|&i| i < len) {
-                    force[i].0 += f.force;
-                    torque[i].0 += f.torque_a;
+                if in_range(b.a) {
+                    add(b, f, false);
                 }
-                if let Some(j) = (b.b as usize).checked_sub(first).filter(|&j| j < len) {
-                    force[j].0 -= f.force;
-                    torque[j].0 += f.torque_b;
+                if in_range(b.b) {
+                    add(b, f, true);
                 }
             }
         }
         return;
     }
-    let in_range = |body: u32| usize::from((body as usize).wrapping_sub(first) < len);
     // Two entries a contact at most, plus the one written past the last kept; blocks of
     // contacts keep the list small (no buffer that grows with the packing) and in cache.
     picked.resize(2 * PICK_BLOCK + 1, 0);
@@ -441,22 +448,13 @@ fn sum_range(
             for (row, b) in bodies.iter().enumerate() {
                 let code = (row as u32) << 1;
                 picked[count] = code;
-                count += in_range(b.a);
+                count += usize::from(in_range(b.a));
                 picked[count] = code | 1;
-                count += in_range(b.b);
+                count += usize::from(in_range(b.b));
             }
             for &code in &picked[..count] {
                 let row = (code >> 1) as usize;
-                let (b, f) = (&bodies[row], &forces[row]);
-                if code & 1 == 0 {
-                    let i = b.a as usize - first;
-                    force[i].0 += f.force;
-                    torque[i].0 += f.torque_a;
-                } else {
-                    let j = b.b as usize - first;
-                    force[j].0 -= f.force;
-                    torque[j].0 += f.torque_b;
-                }
+                add(&bodies[row], &forces[row], code & 1 == 1);
             }
         }
     }
