@@ -111,7 +111,10 @@ fn deposition(steps: u64) -> String {
 
 #[test]
 fn sequential_deposition_settles_every_batch_and_the_floor_carries_the_weight() {
-    let mut sim = build(&deposition(3_000_000), None);
+    // Settled to an unbalanced-force ratio of 2e-3, so that the floor's share of the weight
+    // is within 2 % (below).
+    let scene = deposition(3_000_000).replace("unbalanced_force: 1e-2", "unbalanced_force: 2e-3");
+    let mut sim = build(&scene, None);
     sim.prime().unwrap();
     let reason = run_until_stop(&mut sim, 3_000_000).expect("the deposition ends");
     eprintln!("{reason} at step {}", sim.step_count());
@@ -140,8 +143,37 @@ fn sequential_deposition_settles_every_batch_and_the_floor_carries_the_weight() 
             assert!(l.0.z < 0.0, "the floor is pushed down");
         }
     }
-    // The walls together carry the weight (vertical loads sum to −weight) to the
-    // unbalanced-force level.
+    // Momentum balance: the contact forces between grains cancel in pairs, so what the
+    // walls do not carry is the grains' net force (gravity included), exactly.
+    let mut q = sim.world.query_filtered::<&Force, With<Grain>>();
+    let (mut net_z, mut net_sizes) = (0.0, 0.0);
+    for f in q.iter(&sim.world) {
+        net_z += f.0.z;
+        net_sizes += f.0.length();
+    }
+    assert!(
+        (vertical + weight + net_z).abs() < 1e-12 * weight,
+        "walls {vertical} N, weight {weight} N, net force on the grains {net_z} N"
+    );
+    // The stop criterion bounds that net force: |Σ F_i| ≤ Σ |F_i| = N × ratio × mean
+    // contact force, with ratio ≤ 2e-3. With this pile's mean contact force (about 7.5 mean
+    // grain weights, 442 contacts) that is 1.5 % of the weight: the walls together carry
+    // the weight to 2 %. (With the scene's own ratio of 1e-2 the bound is 7 %, and the
+    // shortfall, the phase of the pile's last vibration, was measured at 3.7 % in one run.)
+    let mut contacts = sim.world.query::<&talus::contact::ContactForce>();
+    let (mut contact_sum, mut carrying) = (0.0, 0usize);
+    for f in contacts.iter(&sim.world) {
+        if f.force != DVec3::ZERO {
+            contact_sum += f.force.length();
+            carrying += 1;
+        }
+    }
+    let bound = grains.len() as f64 * 2e-3 * contact_sum / carrying as f64;
+    eprintln!(
+        "walls carry {} N of {weight} N; net force on the grains {net_z:e} N, sizes summed {net_sizes:e} N, criterion's bound {bound:e} N",
+        -vertical
+    );
+    assert!(net_sizes <= bound * (1.0 + 1e-9), "{net_sizes} > {bound}");
     assert!(
         (vertical + weight).abs() < 2e-2 * weight,
         "walls carry {} N of a weight of {weight} N",

@@ -6,8 +6,10 @@ use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 use smallvec::SmallVec;
 use talus_contact::{
-    Contact, ContactBodies, ContactForce, ContactGeometry, ContactKind, systems::ContactLawTable,
+    Contact, ContactBodies, ContactForce, ContactGeometry, ContactKind, ContactTableSorts,
+    systems::ContactLawTable,
 };
+use talus_core::resources::Clock;
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
@@ -279,6 +281,52 @@ fn update_contacts_inner(
             contact,
         });
     }
+    if world.resource::<Clock>().step % CONTACT_SORT_INTERVAL == 0 {
+        sort_contacts(world, index, s);
+    }
+}
+
+/// Steps between two sorts of the contact tables ([`sort_contacts`]). Despawns scramble a
+/// table a little at every step; a sort of a table that is nearly in order moves few rows.
+/// A fixed step count, not a measure of disorder, so that a run resumed from a saved state
+/// sorts at the same steps as the run that was never interrupted.
+pub const CONTACT_SORT_INTERVAL: u64 = 20;
+
+/// Sorts every law's contact table into the order of its contacts' bodies
+/// ([`talus_contact::order`]) and re-points the index's entries at the entities that now
+/// hold their pairs. Called by the narrow phase every [`CONTACT_SORT_INTERVAL`] steps;
+/// public so that tests can sort at any step. Sorts nothing unless the index is keyed by
+/// `s`'s layout with no contact pending (as after a narrow phase on `s`). Returns how many
+/// contacts changed rows.
+pub fn sort_contacts(world: &mut World, index: &mut ContactIndex, s: &GrainSnapshot) -> usize {
+    if index.layout != s.layout || !index.pending.is_empty() {
+        return 0;
+    }
+    let sorts = world.resource::<ContactTableSorts>().0.clone();
+    let mut moved = 0;
+    for (_, sort) in sorts {
+        moved += sort(world, s);
+    }
+    if moved == 0 {
+        return 0;
+    }
+    // A sorted law's every contact has its bodies in `s`'s layout; an unsorted law's
+    // contacts did not move, and any whose bodies are of another layout is skipped.
+    let mut contacts = world.query::<(Entity, &ContactBodies)>();
+    for (contact, bodies) in contacts.iter(world) {
+        if bodies.layout != s.layout {
+            continue;
+        }
+        let (key, partner) = first_in_order(bodies.a, bodies.b);
+        if let Some(entry) = index
+            .per_grain
+            .get_mut(key as usize)
+            .and_then(|list| list.iter_mut().find(|e| e.partner == partner))
+        {
+            entry.contact = contact;
+        }
+    }
+    moved
 }
 
 /// What every chunk of the narrow phase's parallel pass reads.

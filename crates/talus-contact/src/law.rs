@@ -310,6 +310,17 @@ pub fn install_law<L: ContactLaw>(
         );
         sim.world.despawn(probe);
     }
+    if !pairs.is_empty() {
+        let law_type = std::any::type_name::<L>();
+        let mut sorts = sim
+            .world
+            .get_resource_or_insert_with(crate::order::ContactTableSorts::default);
+        if !sorts.0.iter().any(|&(t, _)| t == law_type) {
+            sorts
+                .0
+                .push((law_type, crate::order::sort_law_contacts::<L>));
+        }
+    }
     sim.world.insert_resource(PairParams::<L>(table));
     sim.world.insert_resource(LawChannels::<L> {
         ids,

@@ -1,6 +1,9 @@
 //! Talus contacts: contact entities, contact kinematics, and the contact-law extension API.
 //!
-//! A contact entity lives while two bodies touch. It carries the pair ([`Contact`]),
+//! A contact lives while two bodies touch. Its entity is a handle for the current step:
+//! the narrow phase periodically sorts each law's table into grain order by moving
+//! contacts among the law's entities ([`order`]), so follow a contact over time by its
+//! pair. It carries the pair ([`Contact`]),
 //! the geometry and force of the last evaluation, and the law's own per-contact history
 //! ([`LawState`]); the force loop sums the contacts' energies chunk by chunk
 //! ([`ContactEnergyPartials`]). The core never names a law:
@@ -13,6 +16,7 @@ pub mod components;
 pub mod compose;
 pub mod kinematics;
 pub mod law;
+pub mod order;
 pub mod params;
 pub mod systems;
 
@@ -23,5 +27,6 @@ pub use compose::{
 };
 pub use kinematics::ContactKinematics;
 pub use law::*;
+pub use order::{ContactTableSort, ContactTableSorts};
 pub use params::*;
 pub use systems::{ContactPlugin, unbalanced_force_ratio};

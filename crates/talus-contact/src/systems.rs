@@ -81,6 +81,8 @@ impl Plugin for ContactPlugin {
             n_materials: n,
         });
         sim.world.insert_resource(ContactEnergyPartials::default());
+        sim.world
+            .insert_resource(crate::order::ContactTableSorts::default());
         sim.add_system(
             Stage::ApplyContactForces,
             "apply_contact_forces",
