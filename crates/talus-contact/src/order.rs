@@ -13,7 +13,6 @@
 //! and history move together, bit for bit.
 
 use bevy_ecs::prelude::*;
-use rayon::prelude::*;
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::components::*;
@@ -110,16 +109,40 @@ fn sort_rows<H: Send + Sync + 'static>(
                 None => return 0,
             }
         }
+        if b.a as usize >= s.len() {
+            return 0;
+        }
     }
     let key = |b: &ContactBodies| (u64::from(b.a) << 32) | u64::from(b.b);
     if bodies.is_sorted_by_key(key) {
         return 0;
     }
-    // Row r receives the contents of row order[r]. The row breaks ties of the key (no
-    // valid table has any), so the order is unique and any sort, on any number of
-    // threads, gives it.
-    let mut order: Vec<u32> = (0..bodies.len() as u32).collect();
-    order.par_sort_unstable_by_key(|&row| (key(&bodies[row as usize]), row));
+    // Row r receives the contents of row order[r]: a counting sort by first body (two
+    // sequential passes, no comparison), then each first body's few contacts by second
+    // body. Stable, so two rows with one key (no valid table has any) keep their order.
+    let mut start = vec![0u32; s.len() + 1];
+    for b in bodies.iter() {
+        start[b.a as usize + 1] += 1;
+    }
+    for k in 1..start.len() {
+        start[k] += start[k - 1];
+    }
+    let mut order = vec![0u32; bodies.len()];
+    for (row, b) in bodies.iter().enumerate() {
+        let slot = &mut start[b.a as usize];
+        order[*slot as usize] = row as u32;
+        *slot += 1;
+    }
+    // Now start[a] is where grain a's group ends, and the next one begins.
+    let mut begin = 0;
+    for &end in &start[..s.len()] {
+        let group = &mut order[begin..end as usize];
+        if group.len() > 1 {
+            group.sort_by_key(|&row| bodies[row as usize].b);
+        }
+        begin = end as usize;
+    }
+    drop(start);
     let moved = order
         .iter()
         .enumerate()
