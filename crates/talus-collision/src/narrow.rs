@@ -110,13 +110,8 @@ impl ContactIndex {
         if self.layout != s.layout {
             // Each contact's own bodies give its place in the new order.
             let new_codes = |contact: Entity| -> Option<(u32, u32)> {
-                let c = world.get::<Contact>(contact)?;
-                let a = s.dense(c.a)? as u32;
-                let b = match c.kind {
-                    ContactKind::GrainGrain => s.dense(c.b)? as u32,
-                    ContactKind::GrainWall => ContactBodies::wall_code(s.wall_index(c.b)?),
-                };
-                Some(first_in_order(a, b))
+                let b = ContactBodies::look_up(s, world.get::<Contact>(contact)?)?;
+                Some(first_in_order(b.a, b.b))
             };
             let mut rekeyed: Vec<GrainContacts> = Vec::new();
             rekeyed.resize_with(s.len(), SmallVec::new);

@@ -46,6 +46,21 @@ pub struct ContactBodies {
 pub const WALL_BODY_BASE: u32 = u32::MAX - 1024;
 
 impl ContactBodies {
+    /// The bodies of contact `c` in snapshot `s`, looked up by entity; `None` if one of
+    /// them is not in the snapshot.
+    pub fn look_up(s: &talus_core::snapshot::GrainSnapshot, c: &Contact) -> Option<Self> {
+        let a = s.dense(c.a)? as u32;
+        let b = match c.kind {
+            ContactKind::GrainGrain => s.dense(c.b)? as u32,
+            ContactKind::GrainWall => Self::wall_code(s.wall_index(c.b)?),
+        };
+        Some(Self {
+            a,
+            b,
+            layout: s.layout,
+        })
+    }
+
     /// The body code of the snapshot's wall `k`, as [`Self::b`] holds it.
     #[inline]
     pub fn wall_code(k: usize) -> u32 {

@@ -312,9 +312,7 @@ pub fn install_law<L: ContactLaw>(
     }
     if !pairs.is_empty() {
         let law_type = std::any::type_name::<L>();
-        let mut sorts = sim
-            .world
-            .get_resource_or_insert_with(crate::order::ContactTableSorts::default);
+        let mut sorts = sim.world.resource_mut::<crate::order::ContactTableSorts>();
         if !sorts.0.iter().any(|&(t, _)| t == law_type) {
             sorts
                 .0

@@ -77,20 +77,6 @@ pub fn sort_law_contacts<L: ContactLaw>(world: &mut World, s: &GrainSnapshot) ->
     moved
 }
 
-/// The bodies of a contact in the snapshot's layout, looked up; `None` if one is missing.
-fn bodies_in(s: &GrainSnapshot, c: &Contact) -> Option<ContactBodies> {
-    let a = s.dense(c.a)? as u32;
-    let b = match c.kind {
-        ContactKind::GrainGrain => s.dense(c.b)? as u32,
-        ContactKind::GrainWall => ContactBodies::wall_code(s.wall_index(c.b)?),
-    };
-    Some(ContactBodies {
-        a,
-        b,
-        layout: s.layout,
-    })
-}
-
 /// Sorts one table's rows (its five columns) by body indices; see [`sort_law_contacts`].
 fn sort_rows<H: Send + Sync + 'static>(
     s: &GrainSnapshot,
@@ -104,7 +90,7 @@ fn sort_rows<H: Send + Sync + 'static>(
     // order, still have to be looked up.
     for (c, b) in contacts.iter().zip(bodies.iter_mut()) {
         if b.layout != s.layout {
-            match bodies_in(s, c) {
+            match ContactBodies::look_up(s, c) {
                 Some(fresh) => *b = fresh,
                 None => return 0,
             }
