@@ -5,6 +5,11 @@
 //! and the run goes on as without the sort, up to the order in which each grain's contact
 //! forces are summed. On LAMMPS's chute (32,000 grains, about 16,000 contacts made and
 //! broken all along) and on grains falling into a walled box (contacts with walls).
+//!
+//! The narrow phase also hands the entity of a contact that ended to a new pair of the
+//! same law instead of despawning one and spawning another: the new pair starts exactly
+//! as a freshly spawned contact would, so a run does the same with and without it, up to
+//! the same order of sums.
 
 mod common;
 
@@ -23,7 +28,10 @@ use talus_linear_spring::TangentialSpring;
 type Record = Vec<u64>;
 
 /// Every contact by its pair (entity bits of `a` and `b`), with the entity that holds it.
-fn contacts(world: &mut World) -> BTreeMap<(u64, u64), (Entity, Record)> {
+type Contacts = BTreeMap<(u64, u64), (Entity, Record)>;
+
+/// The contacts of a world ([`Contacts`]).
+fn contacts(world: &mut World) -> Contacts {
     let mut q = world.query::<(
         Entity,
         &Contact,
@@ -118,6 +126,42 @@ fn sorting_a_table_with_wall_contacts_moves_them_whole() {
     assert!(walls > 5, "wall contacts: {walls}");
 }
 
+#[test]
+fn a_new_pair_given_an_ended_contacts_entity_starts_as_a_spawned_one() {
+    let steps = 2 * CONTACT_SORT_INTERVAL + 4;
+    assert_ne!(
+        (steps + 1) % CONTACT_SORT_INTERVAL,
+        0,
+        "the step compared must not sort the contact tables"
+    );
+    let mut recycled = chute(steps);
+    let mut spawned = chute(steps);
+    spawned.world.resource_mut::<ContactIndex>().never_recycle = true;
+    let before = contacts(&mut recycled.world);
+    assert_eq!(before, contacts(&mut spawned.world), "the two runs agree");
+    let holder_before: BTreeMap<Entity, (u64, u64)> =
+        before.iter().map(|(pair, (e, _))| (*e, *pair)).collect();
+    let (recycled_after, spawned_after) = check_twins(&mut recycled, &mut spawned);
+    // In the compared step, entities that held an ended pair now hold a new one.
+    let handed_over = |after: &Contacts| {
+        after
+            .iter()
+            .filter(|(pair, (e, _))| holder_before.get(e).is_some_and(|p| p != *pair))
+            .count()
+    };
+    let new_pairs = recycled_after
+        .keys()
+        .filter(|p| !before.contains_key(p))
+        .count();
+    let (handed, handed_plain) = (handed_over(&recycled_after), handed_over(&spawned_after));
+    eprintln!("{new_pairs} new pairs; {handed} of them given an ended contact's entity");
+    assert!(
+        handed > new_pairs / 2 && handed <= new_pairs,
+        "{handed} of {new_pairs} new pairs given an ended contact's entity"
+    );
+    assert_eq!(handed_plain, 0, "no hand-over when it is turned off");
+}
+
 /// Sorts the contact table of the scene `make` gives after `steps` steps (which must leave
 /// it out of order) and checks the sort against a twin run without it; at least
 /// `min_loaded` contacts must hold a tangential spring.
@@ -178,34 +222,43 @@ fn check_sort(make: &dyn Fn(u64) -> Simulation, steps: u64, min_loaded: usize) {
     }
     assert_eq!(sort(&mut sorted), 0, "a sorted table stays as it is");
 
+    check_twins(&mut sorted, &mut plain);
+}
+
+/// Steps two runs that hold the same contacts, each pair perhaps at another entity and
+/// row (`moved`, `plain`), and checks that they go on alike: the next step bit for bit up
+/// to the order in which each grain's contact forces are summed, and the springs equal up
+/// to that rounding a sort interval later.
+/// Returns both runs' contacts after the first of those steps.
+fn check_twins(moved: &mut Simulation, plain: &mut Simulation) -> (Contacts, Contacts) {
     // One step: each contact is evaluated from the same inputs, so every spring, force and
     // geometry comes out bit for bit; positions moved with the forces of the step before.
-    sorted.step().unwrap();
+    moved.step().unwrap();
     plain.step().unwrap();
-    let (after_sorted, after_plain) = (contacts(&mut sorted.world), contacts(&mut plain.world));
+    let (after_moved, after_plain) = (contacts(&mut moved.world), contacts(&mut plain.world));
     assert_eq!(
-        after_sorted.keys().collect::<Vec<_>>(),
+        after_moved.keys().collect::<Vec<_>>(),
         after_plain.keys().collect::<Vec<_>>(),
         "the same contacts after the step"
     );
     for (pair, (_, record)) in &after_plain {
         assert_eq!(
-            &after_sorted[pair].1, record,
+            &after_moved[pair].1, record,
             "contact {pair:?} after the step"
         );
     }
     assert_eq!(
-        positions(&mut sorted.world),
+        positions(&mut moved.world),
         positions(&mut plain.world),
         "positions after the step"
     );
     // Velocities took the step's forces, each grain's summed over its contacts in another
     // order: equal up to the rounding of those sums.
-    let (v_sorted, v_plain) = (velocities(&mut sorted.world), velocities(&mut plain.world));
+    let (v_moved, v_plain) = (velocities(&mut moved.world), velocities(&mut plain.world));
     let scale = v_plain.values().map(|v| v.length()).fold(0.0, f64::max);
     let worst = v_plain
         .iter()
-        .map(|(e, v)| (v_sorted[e] - *v).length())
+        .map(|(e, v)| (v_moved[e] - *v).length())
         .fold(0.0, f64::max);
     eprintln!("largest velocity difference after the step: {worst:e} (largest speed {scale})");
     assert!(
@@ -214,13 +267,13 @@ fn check_sort(make: &dyn Fn(u64) -> Simulation, steps: u64, min_loaded: usize) {
     );
 
     // A sort interval more (the narrow phase sorts both runs once more on the way):
-    // contacts made and broken through the re-pointed index, the same pairs as without
-    // the sort, and their springs equal up to the rounding the sums brought in.
-    sorted.run_steps(CONTACT_SORT_INTERVAL).unwrap();
+    // contacts made and broken through the index, the same pairs in both runs, and their
+    // springs equal up to the rounding the sums brought in.
+    moved.run_steps(CONTACT_SORT_INTERVAL).unwrap();
     plain.run_steps(CONTACT_SORT_INTERVAL).unwrap();
-    let (later_sorted, later_plain) = (contacts(&mut sorted.world), contacts(&mut plain.world));
+    let (later_moved, later_plain) = (contacts(&mut moved.world), contacts(&mut plain.world));
     assert_eq!(
-        later_sorted.keys().collect::<Vec<_>>(),
+        later_moved.keys().collect::<Vec<_>>(),
         later_plain.keys().collect::<Vec<_>>(),
         "the same contacts an interval later"
     );
@@ -230,10 +283,11 @@ fn check_sort(make: &dyn Fn(u64) -> Simulation, steps: u64, min_loaded: usize) {
         .map(|(_, r)| spring(r).length())
         .fold(0.0, f64::max);
     for (pair, (_, record)) in &later_plain {
-        let gap = (spring(&later_sorted[pair].1) - spring(record)).length();
+        let gap = (spring(&later_moved[pair].1) - spring(record)).length();
         assert!(
             gap <= 1e-9 * largest,
             "spring of {pair:?} differs by {gap:e} (largest spring {largest:e})"
         );
     }
+    (after_moved, after_plain)
 }

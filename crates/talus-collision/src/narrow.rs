@@ -2,12 +2,13 @@
 //! the life cycle of contact entities (created when a pair starts touching, kept while
 //! it touches, removed when it separates).
 
+use bevy_ecs::archetype::ArchetypeId;
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 use smallvec::SmallVec;
 use talus_contact::{
     Contact, ContactBodies, ContactForce, ContactGeometry, ContactKind, ContactTableSorts,
-    systems::ContactLawTable,
+    systems::{ContactLawTable, LawSlot},
 };
 use talus_core::resources::Clock;
 use talus_core::snapshot::GrainSnapshot;
@@ -55,6 +56,10 @@ pub struct ContactIndex {
     new_pairs: Vec<Vec<(u32, u32)>>,
     /// Per chunk of grains: the contacts that ended this pass (scratch).
     ended: Vec<Vec<Entity>>,
+    /// Spawn every new contact and despawn every ended one, instead of handing ended
+    /// contacts to new pairs of their law (off by default; the results differ only by
+    /// the order in which contact forces are summed, for comparisons).
+    pub never_recycle: bool,
 }
 
 impl ContactIndex {
@@ -192,6 +197,7 @@ fn update_contacts_inner(
     let n = s.len();
     let chunks = n.div_ceil(CHUNK);
     let gap_threshold = list.gap_threshold();
+    let recycle = !index.never_recycle;
     let ContactIndex {
         per_grain,
         new_pairs,
@@ -229,22 +235,46 @@ fn update_contacts_inner(
             };
             narrow_chunk(&pass_state, chunk * CHUNK, entries, candidates, new, gone);
         });
-    // Ended contacts go first, so that the new ones take their freed rows and entity
-    // slots instead of growing the table and the entity list (both double their
-    // capacity when full). Despawning moves the last contact of the table into the freed
-    // row, so the order of removals sets the order in which forces are summed from then
-    // on. Remove in table order (a fixed function of the state, not of entity ids or of
-    // the index's layout), last row first so that no removal moves a contact still to be
-    // removed.
+    // A new pair takes over a contact of its law that ended in this pass, when there is
+    // one: its components are overwritten in place (`LawSlot::recycle`), which costs a
+    // fraction of a despawn and a spawn (each moves a row of five columns and their change
+    // ticks, and updates the entity and archetype lists) and keeps the table's length.
+    // Both are serial, as they change the world's tables. Ended contacts are handed out
+    // in table order, new pairs taken in the order they were found (chunk by chunk, grain
+    // by grain, partner by partner, walls last): a fixed function of the state, not of
+    // entity ids, so a resumed run makes the same choices.
     orphans.retain(|&c| world.get_entity(c).is_ok());
     orphans.extend(ended[..chunks].iter().flatten().copied());
-    orphans
-        .sort_unstable_by_key(|&c| std::cmp::Reverse(world.entity(c).location().table_row.index()));
-    for &c in orphans.iter() {
-        world.despawn(c);
+    let mut ended_at: Vec<(ArchetypeId, usize, Entity)> = orphans
+        .iter()
+        .map(|&c| {
+            let at = world.entity(c).location();
+            (at.archetype_id, at.table_row.index(), c)
+        })
+        .collect();
+    ended_at.sort_unstable_by_key(|&(archetype, row, _)| (archetype, row));
+    let mut reusable: SmallVec<[Reusable; 2]> = SmallVec::new();
+    if recycle {
+        for (k, &(archetype, _, _)) in ended_at.iter().enumerate() {
+            match reusable.last_mut() {
+                Some(group) if group.archetype == archetype => group.end = k + 1,
+                _ => reusable.push(Reusable {
+                    archetype,
+                    next: k,
+                    end: k + 1,
+                    reuses: Vec::new(),
+                    recycle: None,
+                }),
+            }
+        }
     }
-    // New contacts are spawned in the order the pairs were found (chunk by chunk, grain
-    // by grain, partner by partner, walls last): a fixed function of the state.
+    let ContactIndex {
+        per_grain,
+        new_pairs,
+        ..
+    } = index;
+    let mut reused = vec![false; ended_at.len()];
+    let mut to_spawn: Vec<(u32, u32, Contact, &LawSlot)> = Vec::new();
     for &(i, j) in new_pairs[..chunks].iter().flatten() {
         let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
             let wall = &s.walls[k];
@@ -261,15 +291,53 @@ fn update_contacts_inner(
             .expect("the parallel pass kept only interacting pairs");
         // The grain first in dense order is `a` (never the entity ids, which depend on
         // the history of spawns: a restored run must choose alike).
-        let contact = (slot.spawn)(
-            world,
-            Contact {
-                a: s.entity[i as usize],
-                b,
-                kind,
-                pair_slot: slot.pair_slot,
-            },
-        );
+        let pair = Contact {
+            a: s.entity[i as usize],
+            b,
+            kind,
+            pair_slot: slot.pair_slot,
+        };
+        let group = reusable
+            .iter_mut()
+            .find(|g| g.archetype == slot.archetype && g.next < g.end);
+        if let Some(group) = group {
+            let contact = ended_at[group.next].2;
+            reused[group.next] = true;
+            group.next += 1;
+            group.reuses.push((contact, pair));
+            group.recycle = Some(slot.recycle);
+            per_grain[i as usize].push(IndexEntry {
+                partner: j,
+                seen: pass,
+                contact,
+            });
+        } else {
+            to_spawn.push((i, j, pair, slot));
+        }
+    }
+    for group in &reusable {
+        if let Some(recycle) = group.recycle {
+            recycle(world, &group.reuses);
+        }
+    }
+    // The ended contacts not reused go before any spawn, so that new contacts take their
+    // freed rows and entity slots instead of growing the table and the entity list (both
+    // double their capacity when full). Despawning moves the last contact of the table
+    // into the freed row, so the order of removals sets the order in which forces are
+    // summed from then on: last row first, so that no removal moves a contact still to be
+    // removed.
+    let mut removals: Vec<(usize, Entity)> = ended_at
+        .iter()
+        .zip(&reused)
+        .filter(|&(_, &reused)| !reused)
+        .map(|(&(_, row, c), _)| (row, c))
+        .collect();
+    removals.sort_unstable_by_key(|&(row, _)| std::cmp::Reverse(row));
+    for &(_, c) in &removals {
+        world.despawn(c);
+    }
+    for (i, j, pair, slot) in to_spawn {
+        let contact = (slot.spawn)(world, pair);
         per_grain[i as usize].push(IndexEntry {
             partner: j,
             seen: pass,
@@ -279,6 +347,20 @@ fn update_contacts_inner(
     if world.resource::<Clock>().step % CONTACT_SORT_INTERVAL == 0 {
         sort_contacts(world, index, s);
     }
+}
+
+/// The contacts of one archetype that ended in a pass, as a range of the pass's ended
+/// list (sorted by archetype, then row), and the new pairs given to them.
+struct Reusable {
+    archetype: ArchetypeId,
+    /// The next ended contact to hand out.
+    next: usize,
+    /// One past the group's last ended contact.
+    end: usize,
+    /// The ended contacts handed out, with their new pairs.
+    reuses: Vec<(Entity, Contact)>,
+    /// The law's recycling function, once a contact is handed out.
+    recycle: Option<fn(&mut World, &[(Entity, Contact)])>,
 }
 
 /// Steps between two sorts of the contact tables ([`sort_contacts`]). Despawns scramble a

@@ -216,6 +216,28 @@ fn spawn_contact<L: ContactLaw>(world: &mut World, contact: Contact) -> Entity {
         .id()
 }
 
+/// Hands ended contacts of law `L` (entities of its five-component archetype) to new
+/// pairs: each is left exactly as [`spawn_contact`] would have made it for its new pair.
+fn recycle_contacts<L: ContactLaw>(world: &mut World, reuses: &[(Entity, Contact)]) {
+    let mut contacts = world.query::<(
+        &mut Contact,
+        &mut ContactGeometry,
+        &mut ContactForce,
+        &mut ContactBodies,
+        &mut LawState<L::History>,
+    )>();
+    for &(entity, pair) in reuses {
+        let (mut contact, mut geometry, mut force, mut bodies, mut history) = contacts
+            .get_mut(world, entity)
+            .expect("the narrow phase recycles only contacts of the law's archetype");
+        *contact = pair;
+        *geometry = ContactGeometry::default();
+        *force = ContactForce::default();
+        *bodies = ContactBodies::default();
+        history.0 = L::History::default();
+    }
+}
+
 /// Re-creates a saved contact of law `L`: its geometry and force of the last evaluation
 /// (which the next step reads) and its history parsed from RON text.
 fn restore_contact<L: ContactLaw>(
@@ -267,6 +289,26 @@ pub fn install_law<L: ContactLaw>(
         "law `{name}`: its history does not round-trip through postcard ({}); see docs/writing-a-contact-law.md §3.2",
         probe.err().unwrap_or_default()
     );
+    // Create this law's contact archetype now, so that contacts are iterated (and their
+    // forces summed) law by law in installation order, whichever law's contact came
+    // first: a run restored from a saved state then sums in the same order. Its id tells
+    // the narrow phase which ended contacts a new pair of this law may reuse.
+    let archetype = if pairs.is_empty() {
+        bevy_ecs::archetype::ArchetypeId::EMPTY
+    } else {
+        let probe = spawn_contact::<L>(
+            &mut sim.world,
+            Contact {
+                a: Entity::PLACEHOLDER,
+                b: Entity::PLACEHOLDER,
+                kind: ContactKind::GrainGrain,
+                pair_slot: 0,
+            },
+        );
+        let archetype = sim.world.entity(probe).location().archetype_id;
+        sim.world.despawn(probe);
+        archetype
+    };
     let mut table = Vec::with_capacity(pairs.len());
     for (slot, (pair, params)) in pairs.iter().enumerate() {
         let params = params
@@ -287,6 +329,8 @@ pub fn install_law<L: ContactLaw>(
             law: name,
             pair_slot: slot as u32,
             spawn: spawn_contact::<L>,
+            archetype,
+            recycle: recycle_contacts::<L>,
             law_type: std::any::type_name::<L>(),
             history_bytes: contact_history_bytes::<L>,
             history_text: contact_history_text::<L>,
@@ -294,21 +338,6 @@ pub fn install_law<L: ContactLaw>(
         });
         law_table.slots[a as usize * n + b as usize] = entry.clone();
         law_table.slots[b as usize * n + a as usize] = entry;
-    }
-    // Create this law's contact archetype now, so that contacts are iterated (and their
-    // forces summed) law by law in installation order, whichever law's contact came
-    // first: a run restored from a saved state then sums in the same order.
-    if !pairs.is_empty() {
-        let probe = spawn_contact::<L>(
-            &mut sim.world,
-            Contact {
-                a: Entity::PLACEHOLDER,
-                b: Entity::PLACEHOLDER,
-                kind: ContactKind::GrainGrain,
-                pair_slot: 0,
-            },
-        );
-        sim.world.despawn(probe);
     }
     if !pairs.is_empty() {
         let law_type = std::any::type_name::<L>();

@@ -31,6 +31,14 @@ pub struct LawSlot {
     pub pair_slot: u32,
     /// Spawns a contact entity with the law's history component.
     pub spawn: fn(&mut World, Contact) -> Entity,
+    /// The archetype of this law's contacts (the five components [`Self::spawn`] gives,
+    /// nothing else): a contact that ended in it may be handed to a new pair of the law by
+    /// [`Self::recycle`].
+    pub archetype: bevy_ecs::archetype::ArchetypeId,
+    /// Gives each listed entity, a contact of [`Self::archetype`] that has ended, to a new
+    /// pair: its components are overwritten with what [`Self::spawn`] would give that pair.
+    /// Cheaper than a despawn and a spawn, and the table keeps its length.
+    pub recycle: fn(&mut World, &[(Entity, Contact)]),
     /// The law's Rust type name: a saved contact is restored only into the same law.
     pub law_type: &'static str,
     /// Appends the binary encoding of one of this law's contacts' history to the buffer
