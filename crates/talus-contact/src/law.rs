@@ -467,3 +467,74 @@ fn contact_history_text<L: ContactLaw>(bytes: &[u8]) -> Option<String> {
     let history: L::History = postcard::from_bytes(bytes).ok()?;
     ron::to_string(&history).ok()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    /// A law whose history is a number that only a new contact has at zero.
+    struct Counting;
+
+    impl ContactLaw for Counting {
+        type Params = ();
+        type History = u64;
+        fn dissipation() -> Vec<&'static str> {
+            Vec::new()
+        }
+        fn evaluate(_: &(), _: &ContactKinematics, history: &mut u64, _: f64) -> ContactResponse {
+            *history += 1;
+            ContactResponse::default()
+        }
+    }
+
+    /// Every component of a contact, for comparison.
+    fn components(
+        world: &World,
+        e: Entity,
+    ) -> (Contact, ContactGeometry, ContactForce, ContactBodies, u64) {
+        (
+            *world.get::<Contact>(e).unwrap(),
+            *world.get::<ContactGeometry>(e).unwrap(),
+            *world.get::<ContactForce>(e).unwrap(),
+            *world.get::<ContactBodies>(e).unwrap(),
+            world.get::<LawState<u64>>(e).unwrap().0,
+        )
+    }
+
+    #[test]
+    fn a_recycled_contact_is_what_a_spawn_would_make() {
+        let mut world = World::new();
+        let grains: Vec<Entity> = (0..4).map(|_| world.spawn_empty().id()).collect();
+        let pair = |a: usize, b: usize, pair_slot| Contact {
+            a: grains[a],
+            b: grains[b],
+            kind: ContactKind::GrainGrain,
+            pair_slot,
+        };
+        let old = spawn_contact::<Counting>(&mut world, pair(0, 1, 3));
+        // A contact that has lived: every component away from a new contact's.
+        let mut e = world.entity_mut(old);
+        *e.get_mut::<ContactGeometry>().unwrap() = ContactGeometry {
+            normal: DVec3::X,
+            overlap: -1e-9,
+            point: DVec3::ONE,
+        };
+        *e.get_mut::<ContactForce>().unwrap() = ContactForce {
+            force: DVec3::Y,
+            torque_a: DVec3::Z,
+            torque_b: DVec3::NEG_Z,
+        };
+        *e.get_mut::<ContactBodies>().unwrap() = ContactBodies {
+            a: 0,
+            b: 1,
+            layout: 5,
+        };
+        e.get_mut::<LawState<u64>>().unwrap().0 = 41;
+
+        recycle_contacts::<Counting>(&mut world, &[(old, pair(2, 3, 1))]);
+        let spawned = spawn_contact::<Counting>(&mut world, pair(2, 3, 1));
+        assert_eq!(components(&world, old), components(&world, spawned));
+        assert_eq!(world.get::<Contact>(old).unwrap().a, grains[2]);
+    }
+}
