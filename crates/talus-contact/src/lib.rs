@@ -2,8 +2,9 @@
 //!
 //! A contact lives while two bodies touch. Its entity is a handle for the current step:
 //! the narrow phase periodically sorts each law's table into grain order by moving
-//! contacts among the law's entities ([`order`]), so follow a contact over time by its
-//! pair. It carries the pair ([`Contact`]),
+//! contacts among the law's entities ([`order`]), and hands the entity of a contact that
+//! ended to a new pair of its law ([`systems::LawSlot::recycle`]), so follow a contact over
+//! time by its pair. It carries the pair ([`Contact`]),
 //! the geometry and force of the last evaluation, and the law's own per-contact history
 //! ([`LawState`]); the force loop sums the contacts' energies chunk by chunk
 //! ([`ContactEnergyPartials`]). The core never names a law:
