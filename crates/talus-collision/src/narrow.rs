@@ -16,28 +16,47 @@ use talus_core::snapshot::GrainSnapshot;
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, CandidateChunk, NeighbourList};
 
-/// The live contacts entered under one grain.
-type GrainContacts = SmallVec<[IndexEntry; 2]>;
+/// The live contacts entered under one grain. Three fit inline (12 bytes each, 48 bytes
+/// with the length): in a dense packing a grain is the first body of two or three
+/// contacts, and a list on the heap costs a cache miss at every pass.
+type GrainContacts = SmallVec<[IndexEntry; 3]>;
 
-/// One live contact as seen from its first body.
+/// One live contact as seen from its first body. Whether a pass found it again needs no
+/// stamp: all of a grain's entries are tested while the pass is at that grain.
 #[derive(Clone, Copy, Debug)]
 struct IndexEntry {
     /// The second body: its dense index, or its wall code ([`ContactBodies::wall_code`]).
     partner: u32,
-    /// The pass that last found the pair. An entry is dropped the pass after it was not
-    /// found, so only the current and the previous pass are ever compared: a wrapping u32
-    /// is exact.
-    seen: u32,
-    contact: Entity,
+    /// The contact entity's bits ([`Entity::to_bits`]) in two halves: an `Entity` is
+    /// aligned to 8 bytes, which would pad the entry to 16 and the inline list to 56.
+    contact: [u32; 2],
+}
+
+impl IndexEntry {
+    #[inline]
+    fn new(partner: u32, contact: Entity) -> Self {
+        let bits = contact.to_bits();
+        Self {
+            partner,
+            contact: [bits as u32, (bits >> 32) as u32],
+        }
+    }
+
+    /// The contact entity.
+    #[inline]
+    fn contact(&self) -> Entity {
+        Entity::from_bits(u64::from(self.contact[0]) | (u64::from(self.contact[1]) << 32))
+    }
 }
 
 /// Live contacts of each grain, by the grain's dense index in the snapshot: finding
 /// whether a pair already has a contact is a scan of a handful of entries, no hashing and
 /// no entity look-up, and each chunk of grains owns its slice of the index, so the narrow
 /// phase runs in parallel over the same chunks as the neighbour list. Each contact is
-/// entered under its first body only, so a grain holds about half its coordination
-/// number; two entries fit inline (16 bytes each, 40 bytes a grain: a flowing packing
-/// has about one contact per grain), more spill to the heap. When the
+/// entered under the body first in dense order only (the neighbour list's candidates of
+/// a grain are the partners after it), so a grain holds about half its coordination
+/// number, and a pass meets all of a grain's entries at that grain; three entries fit
+/// inline, more spill to the heap. When the
 /// snapshot's order of grains or walls changes (grains added or removed, a component set
 /// changed) the index is re-keyed, from each contact's bodies, before the next pass.
 #[derive(Resource, Default)]
@@ -51,7 +70,6 @@ pub struct ContactIndex {
     /// Contacts restored from a saved state before the snapshot knew their bodies' dense
     /// indices: (first body, second body, contact), entered at the next pass.
     pending: Vec<(Entity, Entity, Entity)>,
-    pass: u32,
     /// Per chunk of grains: the touching pairs that have no contact yet (scratch).
     new_pairs: Vec<Vec<(u32, u32)>>,
     /// Per chunk of grains: the contacts that ended this pass (scratch).
@@ -98,7 +116,7 @@ impl ContactIndex {
         self.per_grain[key as usize]
             .iter()
             .find(|e| e.partner == partner)
-            .map(|e| e.contact)
+            .map(|e| e.contact())
     }
 
     /// Enters an existing contact entity between grain `a` (the contact's first body) and
@@ -121,18 +139,16 @@ impl ContactIndex {
             let mut rekeyed: Vec<GrainContacts> = Vec::new();
             rekeyed.resize_with(s.len(), SmallVec::new);
             for entry in self.per_grain.iter().flatten() {
-                match new_codes(entry.contact) {
+                match new_codes(entry.contact()) {
                     Some((key, partner)) => {
                         rekeyed[key as usize].push(IndexEntry { partner, ..*entry });
                     }
-                    None => orphans.push(entry.contact),
+                    None => orphans.push(entry.contact()),
                 }
             }
             self.per_grain = rekeyed;
             self.layout = s.layout;
         }
-        // A restored contact counts as found at the previous pass, like a live one.
-        let seen = self.pass;
         for (a, b, contact) in std::mem::take(&mut self.pending) {
             let partner = s
                 .dense(b)
@@ -141,11 +157,7 @@ impl ContactIndex {
             match (s.dense(a), partner) {
                 (Some(d), Some(partner)) => {
                     let (key, partner) = first_in_order(d as u32, partner);
-                    self.per_grain[key as usize].push(IndexEntry {
-                        partner,
-                        seen,
-                        contact,
-                    });
+                    self.per_grain[key as usize].push(IndexEntry::new(partner, contact));
                 }
                 _ => orphans.push(contact),
             }
@@ -192,8 +204,6 @@ fn update_contacts_inner(
 ) {
     let mut orphans = Vec::new();
     index.key_by(world, s, &mut orphans);
-    index.pass = index.pass.wrapping_add(1);
-    let pass = index.pass;
     let n = s.len();
     let chunks = n.div_ceil(CHUNK);
     let gap_threshold = list.gap_threshold();
@@ -229,7 +239,6 @@ fn update_contacts_inner(
                 s,
                 table,
                 view,
-                pass,
                 range,
                 gap_threshold,
             };
@@ -306,11 +315,7 @@ fn update_contacts_inner(
             group.next += 1;
             group.reuses.push((contact, pair));
             group.recycle = Some(slot.recycle);
-            per_grain[i as usize].push(IndexEntry {
-                partner: j,
-                seen: pass,
-                contact,
-            });
+            per_grain[i as usize].push(IndexEntry::new(j, contact));
         } else {
             to_spawn.push((i, j, pair, slot));
         }
@@ -338,11 +343,7 @@ fn update_contacts_inner(
     }
     for (i, j, pair, slot) in to_spawn {
         let contact = (slot.spawn)(world, pair);
-        per_grain[i as usize].push(IndexEntry {
-            partner: j,
-            seen: pass,
-            contact,
-        });
+        per_grain[i as usize].push(IndexEntry::new(j, contact));
     }
     if world.resource::<Clock>().step % CONTACT_SORT_INTERVAL == 0 {
         sort_contacts(world, index, s);
@@ -400,7 +401,7 @@ pub fn sort_contacts(world: &mut World, index: &mut ContactIndex, s: &GrainSnaps
             .get_mut(key as usize)
             .and_then(|list| list.iter_mut().find(|e| e.partner == partner))
         {
-            entry.contact = contact;
+            *entry = IndexEntry::new(partner, contact);
         }
     }
     moved
@@ -411,13 +412,12 @@ struct PassState<'a> {
     s: &'a GrainSnapshot,
     table: &'a ContactLawTable,
     view: &'a World,
-    pass: u32,
     range: f64,
     gap_threshold: u16,
 }
 
 /// The narrow phase on one chunk of grains (first grain `base`): tests its candidate
-/// pairs and walls for touch, stamps the live contacts found again, lists the new pairs
+/// pairs and walls for touch, marks the live contacts found again, lists the new pairs
 /// in `new` and the ended contacts in `gone`. Not inlined, so that profiles show it.
 #[inline(never)]
 fn narrow_chunk(
@@ -432,22 +432,25 @@ fn narrow_chunk(
         s,
         table,
         view,
-        pass,
         range,
         gap_threshold,
     } = *state;
     let n = s.len();
     new.clear();
     gone.clear();
-    let mut touching = |i: usize, partner: u32, material_b: u16| {
-        let list = &mut entries[i - base];
-        if let Some(entry) = list.iter_mut().find(|e| e.partner == partner) {
-            entry.seen = pass;
-        } else if table.get(s.material[i], material_b).is_some() {
-            new.push((i as u32, partner));
-        }
-    };
+    // Which of the grain's entries this pass found again.
+    let mut found: Vec<bool> = Vec::new();
     for i in base..(base + CHUNK).min(n) {
+        let list = &mut entries[i - base];
+        found.clear();
+        found.resize(list.len(), false);
+        let mut touching = |partner: u32, material_b: u16| {
+            if let Some(k) = list.iter().position(|e| e.partner == partner) {
+                found[k] = true;
+            } else if table.get(s.material[i], material_b).is_some() {
+                new.push((i as u32, partner));
+            }
+        };
         let p = s.position[i];
         let r = s.radius[i];
         // A frozen grain has an infinite mass (zero inverse) in the snapshot. A contact between
@@ -470,36 +473,36 @@ fn narrow_chunk(
             }
             let reach = r + s.radius[j] + range;
             if s.separation(p, s.position[j]).length_squared() < reach * reach {
-                touching(i, j as u32, s.material[j]);
+                touching(j as u32, s.material[j]);
             }
         }
-        if frozen {
-            continue;
-        }
-        for (w, wall) in s.walls.iter().enumerate() {
-            if (p - wall.point).dot(wall.normal) < r + range {
-                touching(i, ContactBodies::wall_code(w), wall.material);
+        if !frozen {
+            for (w, wall) in s.walls.iter().enumerate() {
+                if (p - wall.point).dot(wall.normal) < r + range {
+                    touching(ContactBodies::wall_code(w), wall.material);
+                }
             }
         }
-    }
-    for list in entries.iter_mut() {
         // Most grains' contacts were all found again: nothing to drop.
-        if list.iter().all(|e| e.seen == pass) {
+        if found.iter().all(|&again| again) {
             continue;
         }
+        let mut k = 0;
         list.retain(|e| {
-            if e.seen == pass {
+            let again = found[k];
+            k += 1;
+            if again {
                 return true;
             }
             // A pair that stopped touching keeps its contact for one more
             // evaluation (with no force), so that the law books the work done in
             // the step in which the contact ended; it goes at the next pass.
             let acted = view
-                .get::<ContactGeometry>(e.contact)
-                .zip(view.get::<ContactForce>(e.contact))
+                .get::<ContactGeometry>(e.contact())
+                .zip(view.get::<ContactForce>(e.contact()))
                 .is_some_and(|(g, f)| f.is_active(g));
             if !acted {
-                gone.push(e.contact);
+                gone.push(e.contact());
             }
             acted
         });
