@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use smallvec::SmallVec;
 use talus_contact::{
     Contact, ContactBodies, ContactForce, ContactGeometry, ContactKind, ContactTableSorts,
-    systems::{ContactLawTable, LawSlot},
+    systems::{ContactLawTable, LawSlot, RecycleContacts},
 };
 use talus_core::resources::Clock;
 use talus_core::snapshot::GrainSnapshot;
@@ -345,7 +345,11 @@ fn update_contacts_inner(
         let contact = (slot.spawn)(world, pair);
         per_grain[i as usize].push(IndexEntry::new(j, contact));
     }
-    if world.resource::<Clock>().step % CONTACT_SORT_INTERVAL == 0 {
+    if world
+        .resource::<Clock>()
+        .step
+        .is_multiple_of(CONTACT_SORT_INTERVAL)
+    {
         sort_contacts(world, index, s);
     }
 }
@@ -361,7 +365,7 @@ struct Reusable {
     /// The ended contacts handed out, with their new pairs.
     reuses: Vec<(Entity, Contact)>,
     /// The law's recycling function, once a contact is handed out.
-    recycle: Option<fn(&mut World, &[(Entity, Contact)])>,
+    recycle: Option<RecycleContacts>,
 }
 
 /// Steps between two sorts of the contact tables ([`sort_contacts`]). Despawns scramble a

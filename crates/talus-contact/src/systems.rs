@@ -22,6 +22,10 @@ pub const ENERGY_CHUNK_LEN: usize = 256;
 /// about four jobs per thread, too coarse to even out chunks of unequal cost.
 const FORCE_CHUNKS_PER_JOB: usize = 1;
 
+/// Gives ended contacts of one law to new pairs ([`LawSlot::recycle`]): each listed entity
+/// is overwritten with what a spawn would give its new pair.
+pub type RecycleContacts = fn(&mut World, &[(Entity, Contact)]);
+
 /// How a new contact between two materials is created: by the law assigned to the pair.
 #[derive(Clone, Debug)]
 pub struct LawSlot {
@@ -38,7 +42,7 @@ pub struct LawSlot {
     /// Gives each listed entity, a contact of [`Self::archetype`] that has ended, to a new
     /// pair: its components are overwritten with what [`Self::spawn`] would give that pair.
     /// Cheaper than a despawn and a spawn, and the table keeps its length.
-    pub recycle: fn(&mut World, &[(Entity, Contact)]),
+    pub recycle: RecycleContacts,
     /// The law's Rust type name: a saved contact is restored only into the same law.
     pub law_type: &'static str,
     /// Appends the binary encoding of one of this law's contacts' history to the buffer
