@@ -1,6 +1,7 @@
 //! The narrow phase: exact overlap tests on the neighbour list's candidate pairs, and
-//! the life cycle of contact entities (created when a pair starts touching, kept while
-//! it touches, removed when it separates).
+//! the life cycle of contact entities (created when a pair starts touching, or handed
+//! over from a contact of the same law that ended in the same pass; kept while it
+//! touches; removed when it separates).
 
 use bevy_ecs::archetype::ArchetypeId;
 use bevy_ecs::prelude::*;
