@@ -443,8 +443,9 @@ fn narrow_chunk(
     let n = s.len();
     new.clear();
     gone.clear();
-    // Which of the grain's entries this pass found again.
-    let mut found: Vec<bool> = Vec::new();
+    // Which of the grain's entries this pass found again (inline: no allocation per
+    // chunk and step; a grain is the first body of a handful of contacts).
+    let mut found: SmallVec<[bool; 16]> = SmallVec::new();
     for i in base..(base + CHUNK).min(n) {
         let list = &mut entries[i - base];
         found.clear();
