@@ -443,16 +443,13 @@ fn narrow_chunk(
     let n = s.len();
     new.clear();
     gone.clear();
-    // Which of the grain's entries this pass found again (inline: no allocation per
-    // chunk and step; a grain is the first body of a handful of contacts).
-    let mut found: SmallVec<[bool; 16]> = SmallVec::new();
+    let mut found = FoundMarks::default();
     for i in base..(base + CHUNK).min(n) {
         let list = &mut entries[i - base];
-        found.clear();
-        found.resize(list.len(), false);
+        found.reset(list.len());
         let mut touching = |partner: u32, material_b: u16| {
             if let Some(k) = list.iter().position(|e| e.partner == partner) {
-                found[k] = true;
+                found.mark(k);
             } else if table.get(s.material[i], material_b).is_some() {
                 new.push((i as u32, partner));
             }
@@ -469,9 +466,10 @@ fn narrow_chunk(
             .iter()
             .zip(&candidates.gap[rows])
         {
-            // Too far at the build to have come within reach since.
+            // Too far at the build to have come within reach since, and so are the rest
+            // (the partners are in increasing order of their gap).
             if gap > gap_threshold {
-                continue;
+                break;
             }
             let j = j as usize;
             if frozen && s.inverse_mass[j] == 0.0 {
@@ -490,12 +488,12 @@ fn narrow_chunk(
             }
         }
         // Most grains' contacts were all found again: nothing to drop.
-        if found.iter().all(|&again| again) {
+        if found.all(list.len()) {
             continue;
         }
         let mut k = 0;
         list.retain(|e| {
-            let again = found[k];
+            let again = found.get(k);
             k += 1;
             if again {
                 return true;
@@ -512,5 +510,59 @@ fn narrow_chunk(
             }
             acted
         });
+    }
+}
+
+/// Which of a grain's index entries a pass found again: one bit per entry for the first
+/// 64 (a grain is the first body of a handful of contacts, so no memory is touched), a
+/// flag per entry past them, for a large grain among many small ones.
+#[derive(Default)]
+struct FoundMarks {
+    /// Entries 0..64.
+    bits: u64,
+    /// Entries from 64 on (empty unless a grain has more).
+    spill: Vec<bool>,
+}
+
+impl FoundMarks {
+    /// Clears the marks for a grain with `len` entries.
+    #[inline]
+    fn reset(&mut self, len: usize) {
+        self.bits = 0;
+        if len > 64 || !self.spill.is_empty() {
+            self.spill.clear();
+            self.spill.resize(len.saturating_sub(64), false);
+        }
+    }
+
+    /// Marks entry `k` found.
+    #[inline]
+    fn mark(&mut self, k: usize) {
+        if k < 64 {
+            self.bits |= 1 << k;
+        } else {
+            self.spill[k - 64] = true;
+        }
+    }
+
+    /// Whether entry `k` was found.
+    #[inline]
+    fn get(&self, k: usize) -> bool {
+        if k < 64 {
+            self.bits >> k & 1 == 1
+        } else {
+            self.spill[k - 64]
+        }
+    }
+
+    /// Whether all of a grain's `len` entries were found.
+    #[inline]
+    fn all(&self, len: usize) -> bool {
+        let low = if len >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << len) - 1
+        };
+        self.bits == low && self.spill.iter().all(|&again| again)
     }
 }

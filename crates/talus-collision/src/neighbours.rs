@@ -20,7 +20,8 @@ pub const SKIN_FRACTION: f64 = 0.1;
 
 /// The candidate partners of one chunk of [`CHUNK`] grains, grain by grain (compressed
 /// rows): the partners of the chunk's `k`-th grain are `partner[first[k]..first[k + 1]]`,
-/// dense indices j > i in increasing order, each with its gap at the build.
+/// dense indices j > i in increasing order of their gap at the build (then of index),
+/// each with that gap.
 #[derive(Default, Clone, Debug)]
 pub struct CandidateChunk {
     /// Where each grain's partners start in `partner`, plus one final entry.
@@ -186,9 +187,11 @@ pub fn update_neighbour_list(
                         }
                     }
                 }
-                // Each grain's partners in increasing order, so that the touching pairs
-                // come out in a fixed order.
-                pairs.sort_unstable_by_key(|&(j, _)| j);
+                // Each grain's partners nearest first (by gap, then index: a fixed order,
+                // so the touching pairs come out in a fixed order): the narrow phase stops
+                // at the first partner too far to be within reach, instead of testing and
+                // skipping the whole skin shell at every step.
+                pairs.sort_unstable_by_key(|&(j, gap)| (gap, j));
                 out.partner.extend(pairs.iter().map(|&(j, _)| j));
                 out.gap.extend(pairs.iter().map(|&(_, g)| g));
             }
