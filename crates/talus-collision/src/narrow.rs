@@ -447,7 +447,8 @@ fn narrow_chunk(
     for i in base..(base + CHUNK).min(n) {
         let list = &mut entries[i - base];
         found.reset(list.len());
-        let mut touching = |partner: u32, material_b: u16| {
+        let first_new = new.len();
+        let mut touching = |new: &mut Vec<(u32, u32)>, partner: u32, material_b: u16| {
             if let Some(k) = list.iter().position(|e| e.partner == partner) {
                 found.mark(k);
             } else if table.get(s.material[i], material_b).is_some() {
@@ -477,13 +478,19 @@ fn narrow_chunk(
             }
             let reach = r + s.radius[j] + range;
             if s.separation(p, s.position[j]).length_squared() < reach * reach {
-                touching(j as u32, s.material[j]);
+                touching(new, j as u32, s.material[j]);
             }
+        }
+        // The candidates come nearest first; the new pairs are listed by partner index,
+        // as a list in index order gives them, so that where and when the list was built
+        // never shows in the order contacts are made (and forces summed).
+        if new.len() > first_new + 1 {
+            new[first_new..].sort_unstable_by_key(|&(_, j)| j);
         }
         if !frozen {
             for (w, wall) in s.walls.iter().enumerate() {
                 if (p - wall.point).dot(wall.normal) < r + range {
-                    touching(ContactBodies::wall_code(w), wall.material);
+                    touching(new, ContactBodies::wall_code(w), wall.material);
                 }
             }
         }
@@ -564,5 +571,34 @@ impl FoundMarks {
             (1u64 << len) - 1
         };
         self.bits == low && self.spill.iter().all(|&again| again)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FoundMarks;
+
+    /// The marks of a grain with more entries than bits (a large grain among small ones)
+    /// and of the next grain with a handful: each entry is found only when marked.
+    #[test]
+    fn found_marks_past_64_entries() {
+        let mut found = FoundMarks::default();
+        found.reset(70);
+        for k in (0..70).filter(|&k| k != 66) {
+            found.mark(k);
+        }
+        assert!(!found.all(70));
+        assert!(found.get(65) && !found.get(66) && found.get(63));
+        found.mark(66);
+        assert!(found.all(70));
+        found.reset(5);
+        assert!(!found.all(5) && !found.get(0));
+        (0..5).for_each(|k| found.mark(k));
+        assert!(found.all(5));
+        found.reset(64);
+        (0..63).for_each(|k| found.mark(k));
+        assert!(!found.all(64));
+        found.mark(63);
+        assert!(found.all(64));
     }
 }

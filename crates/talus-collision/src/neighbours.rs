@@ -187,10 +187,10 @@ pub fn update_neighbour_list(
                         }
                     }
                 }
-                // Each grain's partners nearest first (by gap, then index: a fixed order,
-                // so the touching pairs come out in a fixed order): the narrow phase stops
-                // at the first partner too far to be within reach, instead of testing and
-                // skipping the whole skin shell at every step.
+                // Each grain's partners nearest first (by gap, then index): the narrow
+                // phase stops at the first partner too far to be within reach, instead of
+                // testing and skipping the whole skin shell at every step (it lists the
+                // new touching pairs by index, whatever the order here).
                 pairs.sort_unstable_by_key(|&(j, gap)| (gap, j));
                 out.partner.extend(pairs.iter().map(|&(j, _)| j));
                 out.gap.extend(pairs.iter().map(|&(_, g)| g));

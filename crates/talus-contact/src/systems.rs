@@ -172,9 +172,22 @@ pub fn evaluate_law<L: ContactLaw>(
         // with the new ones; the law worked both over the mean.
         sums.integration_error +=
             r.integration_error + 0.25 * (old_force - r.force).dot(branch_shift);
-        for (k, &id) in channel_ids.iter().enumerate() {
-            sums.dissipated[id] += r.dissipated[k];
+        // By the law's own channel: a fixed-length add the compiler keeps in registers
+        // (indexed by the channels' global ids, each contact's sums went through memory
+        // at run-time addresses). Mapped to the global ids once per chunk.
+        for (total, d) in sums.dissipated.iter_mut().zip(r.dissipated) {
+            *total += d;
         }
+    };
+    let to_global = |local: ContactEnergySums| {
+        let mut global = ContactEnergySums {
+            dissipated: [0.0; MAX_DISSIPATION_CHANNELS],
+            ..local
+        };
+        for (k, &id) in channel_ids.iter().enumerate() {
+            global.dissipated[id] += local.dissipated[k];
+        }
+        global
     };
     let partials = &mut partials.chunks;
     for (c, mut h, mut g, mut f, mut d) in contacts
@@ -193,12 +206,15 @@ pub fn evaluate_law<L: ContactLaw>(
                 .zip(f.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .zip(d.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .with_max_len(FORCE_CHUNKS_PER_JOB)
-                .map(|((((c, h), g), f), d)| evaluate_chunk(&evaluate, snapshot, c, h, g, f, d)),
+                .map(|((((c, h), g), f), d)| {
+                    to_global(evaluate_chunk(&evaluate, snapshot, c, h, g, f, d))
+                }),
         );
     }
 }
 
-/// The force loop over one chunk of a law's contacts, their energies summed. Not
+/// The force loop over one chunk of a law's contacts, their energies summed (the
+/// dissipation by the law's own channel, not yet by global id). Not
 /// inlined, so that profiles show the force loop of each law under its own name.
 #[inline(never)]
 fn evaluate_chunk<H: Send + Sync + 'static>(
