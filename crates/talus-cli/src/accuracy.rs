@@ -374,7 +374,12 @@ fn run_setting(
             };
             value.and_then(|v| v.as_f64()).ok_or_else(|| {
                 StudyError::Study(format!(
-                    "field `quantity.field`: expected a numeric field of a report sample (translational_kinetic, elastic, dissipated_total, ...) or a JSON pointer to one (/stress/regions/0/solid_fraction), found `{field}`"
+                    "field `quantity.field`: expected a numeric field of a report sample (translational_kinetic, elastic, dissipated_total, ...) or a JSON pointer to one (/stress/regions/0/solid_fraction), found `{field}`{}",
+                    if sim.world.get_resource::<ContactEnergyBooking>().is_none_or(|b| b.0) {
+                        ""
+                    } else {
+                        " (the contact energies and balances exist only with `output.energy_ledger: true`)"
+                    }
                 ))
             })?
         }

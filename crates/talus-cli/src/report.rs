@@ -9,7 +9,11 @@ use serde::{Deserialize, Serialize};
 use talus_core::prelude::*;
 use talus_stress::{StressRecord, StressSample};
 
-/// One sample of the energy series.
+/// One sample of the energy series. The contact energies and the balances built on them
+/// (`elastic`, `dissipated*`, `wall_work`, `energy_balance`, `integration_error`,
+/// `bookkeeping_balance`) are booked only when the scene keeps its energy ledger
+/// (`output.energy_ledger`, [`ContactEnergyBooking`]); without it they are NaN here, left
+/// out of the JSON, and the dissipation maps are empty.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct ReportSample {
     /// Step number.
@@ -24,10 +28,12 @@ pub struct ReportSample {
     /// translation and rotation (see `docs/physics/energy-accounting.md`), J.
     pub kinetic_staggering: f64,
     /// Elastic energy stored in contacts, J.
+    #[serde(default = "not_booked", skip_serializing_if = "is_not_a_number")]
     pub elastic: f64,
     /// Energy dissipated since the start, per mechanism, J.
     pub dissipated: BTreeMap<String, f64>,
     /// Sum of `dissipated`, J.
+    #[serde(default = "not_booked", skip_serializing_if = "is_not_a_number")]
     pub dissipated_total: f64,
     /// Power dissipated per mechanism during the step of the sample, W (the heat rate R of
     /// a thermodynamic law, summed over contacts).
@@ -35,15 +41,19 @@ pub struct ReportSample {
     /// Work done on the grains by gravity since the start, J.
     pub gravity_work: f64,
     /// Work done on the grains by moving walls since the start, J.
+    #[serde(default = "not_booked", skip_serializing_if = "is_not_a_number")]
     pub wall_work: f64,
     /// kinetic (with its staggering term) + elastic + dissipated − work by gravity and
     /// walls: the physical energy balance, constant up to the integrator's error, J.
+    #[serde(default = "not_booked", skip_serializing_if = "is_not_a_number")]
     pub energy_balance: f64,
     /// Energy created by the time integration at contacts since the start, as the laws
     /// measure it, J.
+    #[serde(default = "not_booked", skip_serializing_if = "is_not_a_number")]
     pub integration_error: f64,
     /// `energy_balance − integration_error`: constant to rounding when every term is
     /// booked, J.
+    #[serde(default = "not_booked", skip_serializing_if = "is_not_a_number")]
     pub bookkeeping_balance: f64,
     /// Active contacts.
     pub contacts: usize,
@@ -58,6 +68,25 @@ pub struct ReportSample {
 impl ReportSample {
     /// Samples the current state of a world.
     pub fn take(world: &World) -> Self {
+        let mut sample = Self::take_all(world);
+        if !world
+            .get_resource::<ContactEnergyBooking>()
+            .is_none_or(|b| b.0)
+        {
+            sample.elastic = f64::NAN;
+            sample.dissipated.clear();
+            sample.dissipated_total = f64::NAN;
+            sample.dissipation_power.clear();
+            sample.wall_work = f64::NAN;
+            sample.energy_balance = f64::NAN;
+            sample.integration_error = f64::NAN;
+            sample.bookkeeping_balance = f64::NAN;
+        }
+        sample
+    }
+
+    /// Every field, booked or not.
+    fn take_all(world: &World) -> Self {
         let clock = world.resource::<Clock>();
         let e = world.resource::<EnergySnapshot>();
         let ledger = world.resource::<EnergyLedger>();
@@ -112,6 +141,21 @@ impl ReportSample {
     pub fn kinetic(&self) -> f64 {
         self.translational_kinetic + self.rotational_kinetic
     }
+}
+
+/// Whether a field is left out of the JSON: NaN, which a sample holds where the scene does
+/// not book contact energies (JSON has no NaN).
+fn is_not_a_number(x: &f64) -> bool {
+    x.is_nan()
+}
+
+fn booked() -> bool {
+    true
+}
+
+/// What a ledger field reads as when the scene does not book contact energies.
+fn not_booked() -> f64 {
+    f64::NAN
 }
 
 /// Wall-clock time of a run.
@@ -169,6 +213,10 @@ pub struct Report {
     pub plugins: Vec<String>,
     /// Dissipation mechanisms.
     pub dissipation_channels: Vec<String>,
+    /// Whether contact energies were booked (`output.energy_ledger`): without them the
+    /// samples carry no energy balance.
+    #[serde(default = "booked")]
+    pub energy_ledger: bool,
     /// Energy series.
     pub samples: Vec<ReportSample>,
     /// Timings (excluded from determinism comparisons).

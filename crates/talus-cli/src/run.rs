@@ -274,6 +274,10 @@ pub fn run_scene(
         stopped,
         plugins: sim.plan.plugins.clone(),
         dissipation_channels: sim.world.resource::<DissipationChannels>().names.clone(),
+        energy_ledger: sim
+            .world
+            .get_resource::<ContactEnergyBooking>()
+            .is_none_or(|b| b.0),
         samples,
         wall_clock: WallClock {
             total: elapsed,

@@ -1,6 +1,7 @@
 //! Contact kinematics: geometry and relative motion of a pair, computed from the snapshot.
 
 use glam::DVec3;
+use talus_core::lanes::{F4, V4};
 use talus_core::snapshot::{GrainSnapshot, WallState};
 
 /// Everything a contact law needs to know about the pair at this instant.
@@ -147,6 +148,164 @@ impl ContactKinematics {
             effective_mass: 1.0 / s.inverse_mass[i],
             effective_radius: ra,
             min_radius: ra,
+        }
+    }
+}
+
+/// [`ContactKinematics`] of four grain–grain contacts at once, one per lane, computed
+/// with the same operations in the same order as [`ContactKinematics::grain_grain`] and
+/// [`ContactKinematics::set_displacement`]: every lane has the bits of the scalar form.
+/// The lane forms of the laws ([`crate::ContactLaw::evaluate_lanes`]) read it.
+#[derive(Clone, Copy, Debug)]
+pub struct ContactKinematicsLanes {
+    /// Unit normal from `b` to `a`.
+    pub normal: V4,
+    /// Overlap δ, m.
+    pub overlap: F4,
+    /// Contact point.
+    pub point: V4,
+    /// Contact point minus the centre of `a`.
+    pub branch_a: V4,
+    /// Contact point minus the centre of `b`.
+    pub branch_b: V4,
+    /// Velocity of `a`'s material point at the contact minus `b`'s.
+    pub relative_velocity: V4,
+    /// Normal relative velocity, positive while separating.
+    pub normal_velocity: F4,
+    /// Tangential relative velocity at the contact point.
+    pub tangential_velocity: V4,
+    /// Relative displacement of the contact point over the step just taken, m
+    /// ([`ContactKinematics::displacement`]).
+    pub displacement: V4,
+    /// Overlap at the previous evaluation, m.
+    pub previous_overlap: F4,
+    /// Unit normal at the previous evaluation (zero for a new contact).
+    pub previous_normal: V4,
+    /// ω_a − ω_b.
+    pub relative_omega: V4,
+    /// Reduced mass, kg.
+    pub effective_mass: F4,
+    /// Reduced radius, m.
+    pub effective_radius: F4,
+    /// Smaller radius of the pair, m.
+    pub min_radius: F4,
+}
+
+/// The spins of the two grains of four contacts, read with their kinematics.
+#[derive(Clone, Copy, Debug)]
+pub struct SpinLanes {
+    /// Angular velocity of each contact's grain `a`.
+    pub a: V4,
+    /// Angular velocity of each contact's grain `b`.
+    pub b: V4,
+}
+
+impl ContactKinematicsLanes {
+    /// Kinematics of grains `i[k]` (a) and `j[k]` (b) of the snapshot in lane `k`
+    /// ([`ContactKinematics::grain_grain`]), in a box that is not sheared. The
+    /// displacement is left at zero until [`Self::set_displacement`].
+    #[inline(always)]
+    pub fn grain_grain(s: &GrainSnapshot, i: [usize; 4], j: [usize; 4]) -> (Self, SpinLanes) {
+        let ra = F4::from_fn(|k| s.radius[i[k]]);
+        let rb = F4::from_fn(|k| s.radius[j[k]]);
+        let pa = V4::from_fn(|k| s.position[i[k]]);
+        let pb = V4::from_fn(|k| s.position[j[k]]);
+        let d = s.separation_lanes(pa, pb);
+        let dist = d.length();
+        let zero = F4::zero();
+        let normal = dist
+            .gt(zero)
+            .select3(d * (F4::splat(1.0) / dist), V4::splat(DVec3::Z));
+        let overlap = ra + rb - dist;
+        let half = F4::splat(0.5);
+        let branch_a = -normal * (ra - half * overlap);
+        let branch_b = normal * (rb - half * overlap);
+        let point = pb + branch_b;
+        let wa = V4::from_fn(|k| s.omega[i[k]]);
+        let wb = V4::from_fn(|k| s.omega[j[k]]);
+        let va = V4::from_fn(|k| s.velocity[i[k]]);
+        let vb = V4::from_fn(|k| s.velocity[j[k]]);
+        // The scalar form adds the (here zero) velocity of b's image: kept, so that the
+        // sign of a zero comes out the same.
+        let relative_velocity = (va + wa.cross(branch_a)) - (vb + V4::zero() + wb.cross(branch_b));
+        let normal_velocity = relative_velocity.dot(normal);
+        let inverse_ma = F4::from_fn(|k| s.inverse_mass[i[k]]);
+        let inverse_mb = F4::from_fn(|k| s.inverse_mass[j[k]]);
+        let kin = Self {
+            normal,
+            overlap,
+            point,
+            branch_a,
+            branch_b,
+            relative_velocity,
+            normal_velocity,
+            tangential_velocity: relative_velocity - normal * normal_velocity,
+            displacement: V4::zero(),
+            previous_overlap: zero,
+            previous_normal: V4::zero(),
+            relative_omega: wa - wb,
+            effective_mass: F4::splat(1.0) / (inverse_ma + inverse_mb),
+            effective_radius: ra * rb / (ra + rb),
+            // f64::min of two radii (neither is NaN).
+            min_radius: rb.lt(ra).select(rb, ra),
+        };
+        (kin, SpinLanes { a: wa, b: wb })
+    }
+
+    /// [`ContactKinematics::set_displacement`] in four lanes: fills the displacement and
+    /// the previous normal and overlap, and returns how much further the contact point
+    /// moved with the old branch vectors than with the new ones.
+    #[inline(always)]
+    pub fn set_displacement(
+        &mut self,
+        previous_normal: V4,
+        previous_overlap: F4,
+        spin: SpinLanes,
+        dt: f64,
+    ) -> V4 {
+        self.previous_overlap = previous_overlap;
+        self.previous_normal = previous_normal;
+        let dt = F4::splat(dt);
+        let new = previous_normal.eq(V4::zero());
+        let half = F4::splat(0.5);
+        let shift = half * (self.overlap - previous_overlap);
+        let old_a = -previous_normal * (self.branch_a.length() + shift);
+        let old_b = self.branch_b.eq(V4::zero()).select3(
+            V4::zero(),
+            previous_normal * (self.branch_b.length() + shift),
+        );
+        let correction = spin.a.cross((old_a - self.branch_a) * half)
+            - spin.b.cross((old_b - self.branch_b) * half);
+        self.displacement = new.select3(
+            self.relative_velocity * dt,
+            (self.relative_velocity + correction) * dt,
+        );
+        new.select3(V4::zero(), (correction * F4::splat(2.0)) * dt)
+    }
+}
+
+impl ContactKinematicsLanes {
+    /// Four scalar kinematics side by side, lane `k` from `kin[k]`: for testing a law's
+    /// lane form against its scalar form on the same contacts.
+    pub fn from_scalar(kin: [ContactKinematics; 4]) -> Self {
+        let v = |f: fn(&ContactKinematics) -> DVec3| V4::from_fn(|k| f(&kin[k]));
+        let s = |f: fn(&ContactKinematics) -> f64| F4::from_fn(|k| f(&kin[k]));
+        Self {
+            normal: v(|k| k.normal),
+            overlap: s(|k| k.overlap),
+            point: v(|k| k.point),
+            branch_a: v(|k| k.branch_a),
+            branch_b: v(|k| k.branch_b),
+            relative_velocity: v(|k| k.relative_velocity),
+            normal_velocity: s(|k| k.normal_velocity),
+            tangential_velocity: v(|k| k.tangential_velocity),
+            displacement: v(|k| k.displacement),
+            previous_overlap: s(|k| k.previous_overlap),
+            previous_normal: v(|k| k.previous_normal),
+            relative_omega: v(|k| k.relative_omega),
+            effective_mass: s(|k| k.effective_mass),
+            effective_radius: s(|k| k.effective_radius),
+            min_radius: s(|k| k.min_radius),
         }
     }
 }

@@ -10,10 +10,11 @@ use std::any::Any;
 
 use bevy_ecs::prelude::*;
 use talus_core::energy::{DissipationChannels, MAX_DISSIPATION_CHANNELS};
+use talus_core::lanes::{F4, V4};
 use talus_core::schedule::{SimBuilder, Stage};
 
 use crate::components::*;
-use crate::kinematics::ContactKinematics;
+use crate::kinematics::{ContactKinematics, ContactKinematicsLanes};
 use crate::params::{ParamError, ParamSpec, ParamValues};
 use crate::systems::{ContactLawTable, LawSlot, evaluate_law};
 
@@ -37,6 +38,39 @@ pub struct ContactResponse {
     /// arithmetic and continuous time; a law that leaves it at zero still closes the
     /// balance up to its own integration error.
     pub integration_error: f64,
+}
+
+/// What a law's lane form returns for four contacts ([`ContactLaw::evaluate_lanes`]): a
+/// [`ContactResponse`] per lane.
+#[derive(Clone, Copy, Debug)]
+pub struct LaneResponse {
+    /// Force on body `a` at the contact point, N.
+    pub force: V4,
+    /// Extra torque on `a` besides branch × force, N m.
+    pub torque_a: V4,
+    /// Extra torque on `b` besides branch × force, N m.
+    pub torque_b: V4,
+    /// Elastic energy stored after this step, J (only read when energies are booked).
+    pub elastic_energy: F4,
+    /// Energy dissipated during this step, per entry of [`ContactLaw::dissipation`], J
+    /// (only read when energies are booked).
+    pub dissipated: [F4; MAX_DISSIPATION_CHANNELS],
+    /// Energy the time integration created at the contact during this step, J (only read
+    /// when energies are booked).
+    pub integration_error: F4,
+}
+
+impl Default for LaneResponse {
+    fn default() -> Self {
+        Self {
+            force: V4::zero(),
+            torque_a: V4::zero(),
+            torque_b: V4::zero(),
+            elastic_energy: F4::zero(),
+            dissipated: [F4::zero(); MAX_DISSIPATION_CHANNELS],
+            integration_error: F4::zero(),
+        }
+    }
 }
 
 /// A contact law's force routine.
@@ -64,6 +98,37 @@ pub trait ContactLaw: Send + Sync + 'static {
         history: &mut Self::History,
         dt: f64,
     ) -> ContactResponse;
+
+    /// Whether the law has a lane form ([`Self::evaluate_lanes`]). Without one (the
+    /// default) every contact goes through [`Self::evaluate`].
+    const LANES: bool = false;
+
+    /// Evaluates four grain–grain contacts at once, one per lane of `kin` (built by the
+    /// core with [`ContactKinematicsLanes::grain_grain`] and
+    /// [`ContactKinematicsLanes::set_displacement`]): an optional fast path, for the
+    /// cases a law sees most (a contact that persists, say), written with the lane types
+    /// of [`talus_core::lanes`].
+    ///
+    /// `lanes` has bit `k` set for each lane the law may evaluate. Returns the lanes it
+    /// did evaluate (a subset of `lanes`) and their responses: it must have updated their
+    /// history exactly as [`Self::evaluate`] would and give, lane by lane, the same bits
+    /// in every field `evaluate` would (with `book` false, only the force and torques
+    /// count). The lanes it leaves out must keep their history untouched: the core
+    /// evaluates them with [`Self::evaluate`], in order. `book` says whether the energies
+    /// are read ([`talus_core::energy::ContactEnergyBooking`]); a law may skip them when
+    /// it is false. The default evaluates no lane.
+    #[inline(always)]
+    fn evaluate_lanes(
+        params: [&Self::Params; 4],
+        kin: &ContactKinematicsLanes,
+        history: [&mut Self::History; 4],
+        lanes: u32,
+        dt: f64,
+        book: bool,
+    ) -> (u32, LaneResponse) {
+        let _ = (params, kin, history, lanes, dt, book);
+        (0, LaneResponse::default())
+    }
 
     /// Names of the per-contact quantities the law exposes from its history (for example
     /// an elastic energy or a heat rate), in the order [`Self::contact_quantities`] writes

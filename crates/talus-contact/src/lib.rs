@@ -26,8 +26,8 @@ pub use compose::{
     Absent, Composed, ComposedHistory, ComposedLaw, ComposedParams, ContactState, Needs,
     NoCohesion, NoDamping, NoRolling, NoTwisting, SubModel, SubModelKind, is_two_dimensional,
 };
-pub use kinematics::ContactKinematics;
+pub use kinematics::{ContactKinematics, ContactKinematicsLanes, SpinLanes};
 pub use law::*;
 pub use order::{ContactTableSort, ContactTableSorts};
 pub use params::*;
-pub use systems::{ContactPlugin, unbalanced_force_ratio};
+pub use systems::{ContactPlugin, LaneForms, unbalanced_force_ratio};

@@ -7,8 +7,9 @@ use rayon::prelude::*;
 use talus_core::prelude::*;
 
 use crate::components::*;
-use crate::kinematics::ContactKinematics;
+use crate::kinematics::{ContactKinematics, ContactKinematicsLanes};
 use crate::law::{ContactLaw, LawChannels, PairParams};
+use talus_core::lanes::{F4, V4};
 
 /// Contacts per chunk of the force loop: each chunk is evaluated on one thread and sums
 /// its contacts' energies into one [`ContactEnergySums`]. Fixed, not derived from the
@@ -25,6 +26,13 @@ const FORCE_CHUNKS_PER_JOB: usize = 1;
 /// Gives ended contacts of one law to new pairs ([`LawSlot::recycle`]): each listed entity
 /// is overwritten with what a spawn would give its new pair.
 pub type RecycleContacts = fn(&mut World, &[(Entity, Contact)]);
+
+/// Whether the force loops use the laws' lane forms ([`ContactLaw::evaluate_lanes`])
+/// where a law has one: on unless this resource says otherwise. The results are the same
+/// bit for bit either way (a lane form must give its scalar form's bits); off, every
+/// contact goes through [`ContactLaw::evaluate`], for comparisons and tests.
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LaneForms(pub bool);
 
 /// How a new contact between two materials is created: by the law assigned to the pair.
 #[derive(Clone, Debug)]
@@ -112,6 +120,8 @@ pub fn evaluate_law<L: ContactLaw>(
     clock: Res<Clock>,
     params: Res<PairParams<L>>,
     channels: Res<LawChannels<L>>,
+    booking: Option<Res<ContactEnergyBooking>>,
+    lane_forms: Option<Res<LaneForms>>,
     mut partials: ResMut<ContactEnergyPartials>,
     mut contacts: Query<(
         &Contact,
@@ -125,12 +135,16 @@ pub fn evaluate_law<L: ContactLaw>(
     let snapshot = &*snapshot;
     let params = &params.0;
     let channel_ids = &channels.ids;
+    let book = booking.is_none_or(|b| b.0);
+    // `book` is a constant in each copy of the force loop ([`evaluate_chunk`]): without
+    // it the compiler drops the law's energy terms, which feed nothing else.
     let evaluate = |c: &Contact,
                     h: &mut LawState<L::History>,
                     g: &mut ContactGeometry,
                     f: &mut ContactForce,
                     indices: &mut ContactBodies,
-                    sums: &mut ContactEnergySums| {
+                    sums: &mut ContactEnergySums,
+                    book: bool| {
         let Bodies {
             mut kin,
             omega_a,
@@ -142,7 +156,7 @@ pub fn evaluate_law<L: ContactLaw>(
         let branch_shift = kin.set_displacement(g.normal, g.overlap, omega_a, omega_b, dt);
         let old_force = f.force;
         let r = L::evaluate(&params[c.pair_slot as usize], &kin, &mut h.0, dt);
-        if c.kind == ContactKind::GrainWall {
+        if book && c.kind == ContactKind::GrainWall {
             // The old force acted over the first half of the step, the new one acts over
             // the second: the trapezoidal rule velocity Verlet integrates.
             sums.boundary_work += 0.5 * (old_force + r.force).dot(wall_velocity) * dt;
@@ -167,6 +181,9 @@ pub fn evaluate_law<L: ContactLaw>(
                 sums.worst_overlap = (ratio, Some((c.a, c.b)));
             }
         }
+        if !book {
+            return;
+        }
         sums.elastic += r.elastic_energy;
         // The integrator turns the old force with the old branch vectors and the new force
         // with the new ones; the law worked both over the mean.
@@ -189,6 +206,15 @@ pub fn evaluate_law<L: ContactLaw>(
         }
         global
     };
+    // The lane form serves grain pairs in a box without a sheared seam (whose image
+    // velocity only the scalar kinematics handle).
+    let use_lanes = L::LANES && lane_forms.is_none_or(|on| on.0) && !snapshot.is_sheared();
+    let lanes = use_lanes.then_some(LaneForm::<L> {
+        snapshot,
+        params,
+        dt,
+    });
+    let lanes = lanes.as_ref();
     let partials = &mut partials.chunks;
     for (c, mut h, mut g, mut f, mut d) in contacts
         .contiguous_iter_mut()
@@ -207,7 +233,11 @@ pub fn evaluate_law<L: ContactLaw>(
                 .zip(d.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .with_max_len(FORCE_CHUNKS_PER_JOB)
                 .map(|((((c, h), g), f), d)| {
-                    to_global(evaluate_chunk(&evaluate, snapshot, c, h, g, f, d))
+                    to_global(if book {
+                        evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d)
+                    } else {
+                        evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d)
+                    })
                 }),
         );
     }
@@ -216,19 +246,17 @@ pub fn evaluate_law<L: ContactLaw>(
 /// The force loop over one chunk of a law's contacts, their energies summed (the
 /// dissipation by the law's own channel, not yet by global id). Not
 /// inlined, so that profiles show the force loop of each law under its own name.
+/// `BOOK`: whether the contacts' energies are summed ([`ContactEnergyBooking`]). With
+/// `lanes` (a law with a lane form), contacts go four at a time through
+/// [`evaluate_four`]; the rest, and the lanes the law declines, through `evaluate`.
 #[inline(never)]
-fn evaluate_chunk<H: Send + Sync + 'static>(
-    evaluate: &impl Fn(
-        &Contact,
-        &mut LawState<H>,
-        &mut ContactGeometry,
-        &mut ContactForce,
-        &mut ContactBodies,
-        &mut ContactEnergySums,
-    ),
+#[allow(clippy::too_many_arguments)]
+fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bool>(
+    evaluate: &F,
+    lanes: Option<&LaneForm<L>>,
     snapshot: &GrainSnapshot,
     c: &[Contact],
-    h: &mut [LawState<H>],
+    h: &mut [LawState<L::History>],
     g: &mut [ContactGeometry],
     f: &mut [ContactForce],
     d: &mut [ContactBodies],
@@ -236,19 +264,176 @@ fn evaluate_chunk<H: Send + Sync + 'static>(
     let mut sums = ContactEnergySums::default();
     let n = c.len();
     let (h, g, f, d) = (&mut h[..n], &mut g[..n], &mut f[..n], &mut d[..n]);
-    for k in 0..n {
-        // The partners' state is read in no order the hardware can predict: ask for the
-        // grains of a contact a few rows ahead while this one is evaluated.
-        if let Some(ahead) = d.get(k + PREFETCH_AHEAD)
+    // The partners' state is read in no order the hardware can predict: ask for the
+    // grains of the contacts a few rows ahead while these are evaluated.
+    let prefetch = |d: &[ContactBodies], k: usize| {
+        if let Some(ahead) = d.get(k)
             && ahead.layout == snapshot.layout
         {
             snapshot.prefetch(ahead.a as usize);
             snapshot.prefetch(ahead.b as usize);
         }
-        evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], &mut sums);
+    };
+    let mut k = 0;
+    if let Some(form) = lanes {
+        while k + 4 <= n {
+            for ahead in k + LANE_PREFETCH_AHEAD..k + LANE_PREFETCH_AHEAD + 4 {
+                prefetch(d, ahead);
+            }
+            let r = k..k + 4;
+            evaluate_four::<L, F, BOOK>(
+                evaluate,
+                form,
+                (&c[r.clone()]).try_into().expect("four contacts"),
+                (&mut h[r.clone()]).try_into().expect("four contacts"),
+                (&mut g[r.clone()]).try_into().expect("four contacts"),
+                (&mut f[r.clone()]).try_into().expect("four contacts"),
+                (&mut d[r]).try_into().expect("four contacts"),
+                &mut sums,
+            );
+            k += 4;
+        }
+    }
+    for k in k..n {
+        prefetch(d, k + PREFETCH_AHEAD);
+        evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], &mut sums, BOOK);
     }
     sums
 }
+
+/// The scalar evaluation of one contact (the force loop's closure): kinematics, the
+/// law's [`ContactLaw::evaluate`], the contact's components and the chunk's sums.
+trait ScalarEvaluation<H: Send + Sync + 'static>:
+    Fn(
+    &Contact,
+    &mut LawState<H>,
+    &mut ContactGeometry,
+    &mut ContactForce,
+    &mut ContactBodies,
+    &mut ContactEnergySums,
+    bool,
+)
+{
+}
+
+impl<H: Send + Sync + 'static, F> ScalarEvaluation<H> for F where
+    F: Fn(
+        &Contact,
+        &mut LawState<H>,
+        &mut ContactGeometry,
+        &mut ContactForce,
+        &mut ContactBodies,
+        &mut ContactEnergySums,
+        bool,
+    )
+{
+}
+
+/// What the lane form of law `L` reads besides its contacts.
+struct LaneForm<'a, L: ContactLaw> {
+    snapshot: &'a GrainSnapshot,
+    params: &'a [L::Params],
+    dt: f64,
+}
+
+/// Four consecutive contacts of a chunk through the law's lane form
+/// ([`ContactLaw::evaluate_lanes`]): the grain pairs whose dense indices are current go
+/// into the lanes; then, lane by lane in order, a contact the law evaluated gets its
+/// components and its share of the sums exactly as the scalar path would give them, and
+/// any other goes through the scalar path (`evaluate`). The results are therefore the
+/// same bit for bit as four scalar evaluations.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bool>(
+    evaluate: &F,
+    form: &LaneForm<L>,
+    c: &[Contact; 4],
+    h: &mut [LawState<L::History>; 4],
+    g: &mut [ContactGeometry; 4],
+    f: &mut [ContactForce; 4],
+    d: &mut [ContactBodies; 4],
+    sums: &mut ContactEnergySums,
+) {
+    let s = form.snapshot;
+    let mut valid = 0u32;
+    for k in 0..4 {
+        let current = c[k].kind == ContactKind::GrainGrain && d[k].layout == s.layout;
+        valid |= u32::from(current) << k;
+    }
+    // Lanes left out read grain 0 (there is one: these contacts have grains).
+    let index = |k: usize, body: u32| if valid >> k & 1 == 1 { body as usize } else { 0 };
+    let i: [usize; 4] = std::array::from_fn(|k| index(k, d[k].a));
+    let j: [usize; 4] = std::array::from_fn(|k| index(k, d[k].b));
+    let mut done = 0;
+    let mut out = None;
+    if valid != 0 {
+        let (mut kin, spin) = ContactKinematicsLanes::grain_grain(s, i, j);
+        let branch_shift = kin.set_displacement(
+            V4::from_fn(|k| g[k].normal),
+            F4::from_fn(|k| g[k].overlap),
+            spin,
+            form.dt,
+        );
+        let params = std::array::from_fn(|k| &form.params[c[k].pair_slot as usize]);
+        let old_force = BOOK.then(|| V4::from_fn(|k| f[k].force));
+        let history = h.each_mut().map(|state| &mut state.0);
+        let (evaluated, r) = L::evaluate_lanes(params, &kin, history, valid, form.dt, BOOK);
+        done = evaluated & valid;
+        if done != 0 {
+            let torque_a = kin.branch_a.cross(r.force) + r.torque_a;
+            let torque_b = kin.branch_b.cross(-r.force) + r.torque_b;
+            // The integrator turns the old force with the old branch vectors and the new
+            // force with the new ones; the law worked both over the mean (as the scalar
+            // path books it).
+            let shift_work = old_force.map(|old| (old - r.force).dot(branch_shift) * F4::splat(0.25));
+            out = Some((kin, r, torque_a, torque_b, shift_work));
+        }
+    }
+    let Some((kin, r, torque_a, torque_b, shift_work)) = out else {
+        for k in 0..4 {
+            evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], sums, BOOK);
+        }
+        return;
+    };
+    let (normal, overlap, point) = (kin.normal.to_array(), kin.overlap.to_array(), kin.point.to_array());
+    let (force, torque_a, torque_b) = (r.force.to_array(), torque_a.to_array(), torque_b.to_array());
+    let min_radius = kin.min_radius.to_array();
+    for k in 0..4 {
+        if done >> k & 1 == 0 {
+            evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], sums, BOOK);
+            continue;
+        }
+        // Field by field: a whole struct written at once went through a copy on the
+        // stack whose wide reload waited for its narrow stores (10 % of the loop).
+        let (geometry, forces) = (&mut g[k], &mut f[k]);
+        geometry.normal = normal[k];
+        geometry.overlap = overlap[k];
+        geometry.point = point[k];
+        forces.force = force[k];
+        forces.torque_a = torque_a[k];
+        forces.torque_b = torque_b[k];
+        // The indices are those the lanes read, and still current.
+        debug_assert_eq!((d[k].a, d[k].b, d[k].layout), (i[k] as u32, j[k] as u32, s.layout));
+        sums.active += usize::from(f[k].is_active(&g[k]));
+        if overlap[k] >= sums.worst_overlap.0 * min_radius[k] {
+            let ratio = overlap[k] / min_radius[k];
+            if ratio > sums.worst_overlap.0 {
+                sums.worst_overlap = (ratio, Some((c[k].a, c[k].b)));
+            }
+        }
+        if BOOK && let Some(shift_work) = shift_work {
+            sums.elastic += r.elastic_energy.to_array()[k];
+            sums.integration_error +=
+                r.integration_error.to_array()[k] + shift_work.to_array()[k];
+            for (total, channel) in sums.dissipated.iter_mut().zip(&r.dissipated) {
+                *total += channel.to_array()[k];
+            }
+        }
+    }
+}
+
+/// How many contacts ahead of the four being evaluated the lane path asks for grains.
+const LANE_PREFETCH_AHEAD: usize = 8;
 
 /// How many contacts ahead the force loop asks for its grains' state.
 const PREFETCH_AHEAD: usize = 4;

@@ -49,6 +49,22 @@ impl EnergyLedger {
     }
 }
 
+/// Whether the force loops book the contacts' energies at every step: the elastic
+/// energy, the dissipation per mechanism, the work of moving walls through contacts and
+/// the integration error (the scene's `output.energy_ledger`, on by default). Off, the
+/// forces and the trajectory are the same bit for bit and the force loop skips those
+/// sums; the ledger's contact terms and [`EnergySnapshot::elastic`] stay zero and the
+/// report leaves them out. The kinetic energies and the work of gravity are kept. No
+/// resource means booked.
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ContactEnergyBooking(pub bool);
+
+impl Default for ContactEnergyBooking {
+    fn default() -> Self {
+        Self(true)
+    }
+}
+
 /// Instantaneous energies of the current state, recomputed by the sample stage.
 #[derive(Resource, Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EnergySnapshot {

@@ -8,6 +8,7 @@ pub mod components;
 pub mod energy;
 pub mod gear;
 pub mod integrate;
+pub mod lanes;
 pub mod periodic;
 pub mod resources;
 pub mod schedule;

@@ -206,6 +206,21 @@ impl NearestImage {
         let down = DVec3::select(d.cmplt(-self.half), -self.length, DVec3::ZERO);
         d - DVec3::select(d.cmpgt(self.half), self.length, down)
     }
+
+    /// [`Self::apply`] in four lanes, bit for bit.
+    #[inline(always)]
+    pub fn apply_lanes(&self, d: crate::lanes::V4) -> crate::lanes::V4 {
+        use crate::lanes::F4;
+        let axis = |x: F4, length: f64, half: f64| {
+            let down = x.lt(F4::splat(-half)).select(F4::splat(-length), F4::zero());
+            x - x.gt(F4::splat(half)).select(F4::splat(length), down)
+        };
+        crate::lanes::V4 {
+            x: axis(d.x, self.length.x, self.half.x),
+            y: axis(d.y, self.length.y, self.half.y),
+            z: axis(d.z, self.length.z, self.half.z),
+        }
+    }
 }
 
 /// Wraps grain positions back into the periodic box after the drift.

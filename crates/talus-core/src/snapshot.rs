@@ -106,6 +106,22 @@ impl GrainSnapshot {
         }
     }
 
+    /// Whether the periodic box is sheared (Lees–Edwards): then a pair's separation and
+    /// relative velocity depend on the seam it crosses, which only the scalar
+    /// [`Self::separation_and_image_velocity`] handles.
+    #[inline]
+    pub fn is_sheared(&self) -> bool {
+        self.periodic.is_some_and(|b| b.shear.is_some())
+    }
+
+    /// [`Self::separation`] of four pairs at once, bit for bit, in a box that is not
+    /// sheared ([`Self::is_sheared`]); the image velocity is then zero.
+    #[inline(always)]
+    pub fn separation_lanes(&self, a: crate::lanes::V4, b: crate::lanes::V4) -> crate::lanes::V4 {
+        debug_assert!(!self.is_sheared());
+        self.image.apply_lanes(a - b)
+    }
+
     /// Separation p_a − p_b (nearest image) and the velocity of that image of b beyond
     /// b's own: nonzero only across a Lees–Edwards gradient seam. The pair's relative
     /// velocity is v_a − v_b − (the image velocity).

@@ -111,6 +111,7 @@ pub fn rerun_export(
     energy: Res<EnergySnapshot>,
     ledger: Res<EnergyLedger>,
     channels: Res<DissipationChannels>,
+    booking: Option<Res<ContactEnergyBooking>>,
     recorder: Option<ResMut<RerunRecorder>>,
     grains: Query<(&Position, &Velocity, &Radius), With<Grain>>,
     contacts: Query<(&Contact, &ContactGeometry, &ContactForce)>,
@@ -170,6 +171,7 @@ pub fn rerun_export(
         &energy,
         &ledger,
         &channels,
+        booking.is_none_or(|b| b.0),
     ));
     recorder.frames += 1;
     if let Err(e) = result
@@ -491,13 +493,16 @@ fn log_walls(
     Ok(())
 }
 
-/// Logs the energy statistics as scalars under `stats/`.
+/// Logs the energy statistics as scalars under `stats/`; the contact energies
+/// (`elastic`, `wall_work`, `dissipated/*`, `dissipation_power/*`) only if `booked`
+/// ([`ContactEnergyBooking`]).
 fn log_stats(
     rec: &rerun::RecordingStream,
     s: &mut ExportState,
     energy: &EnergySnapshot,
     ledger: &EnergyLedger,
     channels: &DissipationChannels,
+    booked: bool,
 ) -> rerun::RecordingStreamResult<()> {
     if s.stats_paths.is_empty() {
         s.stats_paths = STATS
@@ -527,8 +532,13 @@ fn log_stats(
         energy.contacts as f64,
         energy.max_overlap_ratio,
     ];
-    for (path, value) in s.stats_paths.iter().zip(values) {
-        rec.log(path.clone(), &rerun::Scalars::single(value))?;
+    for ((path, value), name) in s.stats_paths.iter().zip(values).zip(STATS) {
+        if booked || !matches!(name, "elastic" | "wall_work") {
+            rec.log(path.clone(), &rerun::Scalars::single(value))?;
+        }
+    }
+    if !booked {
+        return Ok(());
     }
     for (i, path) in s.dissipated_paths.iter().enumerate() {
         let value = ledger.dissipated.get(i).copied().unwrap_or(0.0);

@@ -1138,6 +1138,13 @@ impl Scene {
             rotation,
         });
         builder.world.insert_resource(Materials(materials));
+        // Only when off: no resource means booked, and a default run's world (whose
+        // resources are entities in bevy_ecs 0.20) stays as it was.
+        if !f.output.energy_ledger {
+            builder
+                .world
+                .insert_resource(talus_core::energy::ContactEnergyBooking(false));
+        }
         builder.add_plugin(&ContactPlugin);
         for install in &installs {
             builder.add_plugin(install);

@@ -450,6 +450,12 @@ pub struct OutputSpec {
     /// `state.ron`, for `talus run --resume` or another scene's `start_from`. Default: false.
     #[serde(default)]
     pub state: bool,
+    /// Book the contacts' energies at every step (elastic energy, dissipation per
+    /// mechanism, work of moving walls, integration error) for the report's energy
+    /// balance. `false` skips those sums in the force loop, the forces and trajectory
+    /// unchanged bit for bit; the report then leaves the balance out. Default: true.
+    #[serde(default = "default_true")]
+    pub energy_ledger: bool,
 }
 
 impl Default for OutputSpec {
@@ -459,6 +465,7 @@ impl Default for OutputSpec {
             recording_interval: default_interval(),
             report_interval: default_interval(),
             state: false,
+            energy_ledger: true,
         }
     }
 }

@@ -13,6 +13,7 @@
 //! energy balance of a run closes to third order in the step at contact events
 //! (docs/physics/contact-onset.md).
 
+mod lanes;
 pub mod parts;
 
 use std::any::Any;
@@ -163,6 +164,20 @@ impl ContactLaw for LinearSpring {
     type History = TangentialSpring;
     fn dissipation() -> Vec<&'static str> {
         vec!["normal_damping", "tangential_damping", "friction_slip"]
+    }
+
+    const LANES: bool = true;
+
+    #[inline(always)]
+    fn evaluate_lanes(
+        params: [&LinearParams; 4],
+        kin: &ContactKinematicsLanes,
+        history: [&mut TangentialSpring; 4],
+        lanes: u32,
+        _dt: f64,
+        book: bool,
+    ) -> (u32, LaneResponse) {
+        lanes::evaluate(params, kin, history, lanes, book)
     }
 
     #[inline]
