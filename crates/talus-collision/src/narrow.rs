@@ -1,7 +1,14 @@
 //! The narrow phase: exact overlap tests on the neighbour list's candidate pairs, and
 //! the life cycle of contact entities (created when a pair starts touching, or handed
 //! over from a contact of the same law that ended in the same pass; kept while it
-//! touches; removed when it separates).
+//! touches or carried a force at its last evaluation; removed when neither holds).
+//!
+//! The candidate pairs of a chunk of grains come in increasing order of their gap at the
+//! neighbour list's build, so those that may be within reach are a prefix of the list,
+//! tested four at a time in lanes with no regard for which grain they belong to. Only the
+//! touching pairs look at a grain's contacts (to tell new pairs from live ones). Which
+//! contacts may end is not found by testing every live contact again: the force loops
+//! list those that carried no force ([`IdleContacts`]), and only those are tested.
 
 use bevy_ecs::archetype::ArchetypeId;
 use bevy_ecs::prelude::*;
@@ -9,8 +16,10 @@ use rayon::prelude::*;
 use smallvec::SmallVec;
 use talus_contact::{
     Contact, ContactBodies, ContactForce, ContactGeometry, ContactKind, ContactTableSorts,
+    IdleContacts,
     systems::{ContactLawTable, LawSlot, RecycleContacts},
 };
+use talus_core::lanes::{F4, V4};
 use talus_core::resources::Clock;
 use talus_core::snapshot::GrainSnapshot;
 
@@ -22,8 +31,7 @@ use crate::neighbours::{CHUNK, CandidateChunk, NeighbourList};
 /// contacts, and a list on the heap costs a cache miss at every pass.
 type GrainContacts = SmallVec<[IndexEntry; 3]>;
 
-/// One live contact as seen from its first body. Whether a pass found it again needs no
-/// stamp: all of a grain's entries are tested while the pass is at that grain.
+/// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]
 struct IndexEntry {
     /// The second body: its dense index, or its wall code ([`ContactBodies::wall_code`]).
@@ -56,8 +64,7 @@ impl IndexEntry {
 /// phase runs in parallel over the same chunks as the neighbour list. Each contact is
 /// entered under the body first in dense order only (the neighbour list's candidates of
 /// a grain are the partners after it), so a grain holds about half its coordination
-/// number, and a pass meets all of a grain's entries at that grain; three entries fit
-/// inline, more spill to the heap. When the
+/// number; three entries fit inline, more spill to the heap. When the
 /// snapshot's order of grains or walls changes (grains added or removed, a component set
 /// changed) the index is re-keyed, from each contact's bodies, before the next pass.
 #[derive(Resource, Default)]
@@ -73,8 +80,6 @@ pub struct ContactIndex {
     pending: Vec<(Entity, Entity, Entity)>,
     /// Per chunk of grains: the touching pairs that have no contact yet (scratch).
     new_pairs: Vec<Vec<(u32, u32)>>,
-    /// Per chunk of grains: the contacts that ended this pass (scratch).
-    ended: Vec<Vec<Entity>>,
     /// Spawn every new contact and despawn every ended one, instead of handing ended
     /// contacts to new pairs of their law (off by default; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
@@ -204,7 +209,20 @@ fn update_contacts_inner(
     range: f64,
 ) {
     let mut orphans = Vec::new();
+    // Contacts restored from a saved state, or an index re-keyed to a new order of
+    // grains, were not all seen by the last force pass: check every contact this time.
+    let idle = std::mem::take(&mut *world.resource_mut::<IdleContacts>());
+    let check_all = !index.pending.is_empty()
+        || index.layout != s.layout
+        || !idle.evaluated
+        || idle.layout != s.layout;
     index.key_by(world, s, &mut orphans);
+    world.resource_mut::<IdleContacts>().pairs = {
+        // Keep the allocation for the next force pass.
+        let mut pairs = idle.pairs.clone();
+        pairs.clear();
+        pairs
+    };
     let n = s.len();
     let chunks = n.div_ceil(CHUNK);
     let gap_threshold = list.gap_threshold();
@@ -212,39 +230,63 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain,
         new_pairs,
-        ended,
         ..
     } = index;
     if new_pairs.len() < chunks {
         new_pairs.resize_with(chunks, Vec::new);
     }
-    if ended.len() < chunks {
-        ended.resize_with(chunks, Vec::new);
-    }
-    // Each chunk of grains owns its slice of the index: the overlap tests, marking the
-    // pairs found again, listing the new ones and dropping the ended ones run in
-    // parallel; only spawning and despawning entities, which change the world's tables,
-    // are serial.
-    let view: &World = world;
+    // Each chunk of grains owns its slice of the index: the overlap tests and the listing
+    // of new pairs run in parallel; only spawning and despawning entities, which change
+    // the world's tables, are serial.
     per_grain
-        .par_chunks_mut(CHUNK)
+        .par_chunks(CHUNK)
         .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
-        .zip(ended[..chunks].par_iter_mut())
         .enumerate()
         // Chunks differ in cost (dense and dilute regions, the frozen base): small jobs,
         // which idle threads steal, even the threads' shares out.
         .with_max_len(2)
-        .for_each(|(chunk, (((entries, candidates), new), gone))| {
+        .for_each(|(chunk, ((entries, candidates), new))| {
             let pass_state = PassState {
                 s,
                 table,
-                view,
                 range,
                 gap_threshold,
             };
-            narrow_chunk(&pass_state, chunk * CHUNK, entries, candidates, new, gone);
+            narrow_chunk(&pass_state, chunk * CHUNK, entries, candidates, new);
         });
+    // A contact ends when its bodies neither touch now nor carried a force at its last
+    // evaluation (one that did is kept for one more evaluation, so that its law books the
+    // work of the step in which it ended). Those that did not are few, and the force
+    // loops listed them.
+    let mut ended: Vec<Entity> = Vec::new();
+    let view: &World = world;
+    if check_all {
+        for (key, entries) in per_grain.iter_mut().enumerate() {
+            entries.retain(|e| {
+                let keep = touching(s, range, key, e.partner) || {
+                    view.get::<ContactGeometry>(e.contact())
+                        .zip(view.get::<ContactForce>(e.contact()))
+                        .is_some_and(|(g, f)| f.is_active(g))
+                };
+                if !keep {
+                    ended.push(e.contact());
+                }
+                keep
+            });
+        }
+    } else {
+        for &[a, b] in &idle.pairs {
+            let (key, partner) = first_in_order(a, b);
+            if touching(s, range, key as usize, partner) {
+                continue;
+            }
+            let entries = &mut per_grain[key as usize];
+            if let Some(k) = entries.iter().position(|e| e.partner == partner) {
+                ended.push(entries.remove(k).contact());
+            }
+        }
+    }
     // A new pair takes over a contact of its law that ended in this pass, when there is
     // one: its components are overwritten in place (`LawSlot::recycle`), which costs a
     // fraction of a despawn and a spawn (each moves a row of five columns and their change
@@ -254,7 +296,7 @@ fn update_contacts_inner(
     // by grain, partner by partner, walls last): a fixed function of the state, not of
     // entity ids, so a resumed run makes the same choices.
     orphans.retain(|&c| world.get_entity(c).is_ok());
-    orphans.extend(ended[..chunks].iter().flatten().copied());
+    orphans.extend(ended);
     let mut ended_at: Vec<(ArchetypeId, usize, Entity)> = orphans
         .iter()
         .map(|&c| {
@@ -416,189 +458,113 @@ pub fn sort_contacts(world: &mut World, index: &mut ContactIndex, s: &GrainSnaps
 struct PassState<'a> {
     s: &'a GrainSnapshot,
     table: &'a ContactLawTable,
-    view: &'a World,
     range: f64,
     gap_threshold: u16,
 }
 
-/// The narrow phase on one chunk of grains (first grain `base`): tests its candidate
-/// pairs and walls for touch, marks the live contacts found again, lists the new pairs
-/// in `new` and the ended contacts in `gone`. Not inlined, so that profiles show it.
+/// Whether grain `key` touches body `partner` (a grain after it in dense order, or a wall
+/// code) within the interaction range: the test of the pass ([`narrow_chunk`]), one pair
+/// at a time, with the same bits.
+#[inline]
+fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
+    let (p, r) = (s.position[key], s.radius[key]);
+    match ContactBodies::wall_of(partner) {
+        Some(w) => {
+            let wall = &s.walls[w];
+            (p - wall.point).dot(wall.normal) < r + range
+        }
+        None => {
+            let j = partner as usize;
+            let reach = r + s.radius[j] + range;
+            s.separation(p, s.position[j]).length_squared() < reach * reach
+        }
+    }
+}
+
+/// The narrow phase on one chunk of grains (first grain `base`): tests the candidate
+/// pairs that may be within reach (a prefix of the chunk's pairs, which come in
+/// increasing order of their gap at the build) four at a time, and each grain against
+/// each wall, and lists in `new` the touching pairs that have no contact yet, ordered by
+/// grain, then partner (walls last), whatever the order of the tests. Not inlined, so
+/// that profiles show it.
 #[inline(never)]
 fn narrow_chunk(
     state: &PassState,
     base: usize,
-    entries: &mut [GrainContacts],
+    entries: &[GrainContacts],
     candidates: &CandidateChunk,
     new: &mut Vec<(u32, u32)>,
-    gone: &mut Vec<Entity>,
 ) {
     let PassState {
         s,
         table,
-        view,
         range,
         gap_threshold,
     } = *state;
-    let n = s.len();
     new.clear();
-    gone.clear();
-    let mut found = FoundMarks::default();
-    for i in base..(base + CHUNK).min(n) {
-        let list = &mut entries[i - base];
-        found.reset(list.len());
-        let first_new = new.len();
-        let mut touching = |new: &mut Vec<(u32, u32)>, partner: u32, material_b: u16| {
-            if let Some(k) = list.iter().position(|e| e.partner == partner) {
-                found.mark(k);
-            } else if table.get(s.material[i], material_b).is_some() {
-                new.push((i as u32, partner));
-            }
+    // A contact between two frozen grains (zero inverse mass in the snapshot), or a
+    // frozen grain and a wall, moves nothing, and its reduced mass (hence a mass-scaled
+    // dashpot) would be infinite: none is made.
+    let frozen = |i: usize| s.inverse_mass[i] == 0.0;
+    let mut touch = |i: usize, partner: u32, material_b: u16| {
+        let known = entries[i - base].iter().any(|e| e.partner == partner);
+        if !known && table.get(s.material[i], material_b).is_some() {
+            new.push((i as u32, partner));
+        }
+    };
+    // The pairs come in no order of their grains: bring the chunk's contact lists (12 KB)
+    // in ahead, in order, instead of waiting for memory at the first touch of each.
+    talus_core::snapshot::prefetch_all(entries);
+    let tested = candidates.within_threshold(gap_threshold);
+    let (local, partner) = (&candidates.local[..tested], &candidates.partner[..tested]);
+    // Four pairs at a time where the separation is the plain nearest image (the same bits
+    // as one at a time); across a sheared seam, one at a time.
+    let lanes = !s.is_sheared();
+    for (local, partner) in local.chunks(4).zip(partner.chunks(4)) {
+        // A short batch repeats its first pair in the lanes left over.
+        let i: [usize; 4] =
+            std::array::from_fn(|l| base + *local.get(l).unwrap_or(&local[0]) as usize);
+        let j: [u32; 4] = std::array::from_fn(|l| *partner.get(l).unwrap_or(&partner[0]));
+        let mut within = if lanes {
+            let reach = F4::from_fn(|l| s.radius[i[l]])
+                + F4::from_fn(|l| s.radius[j[l] as usize])
+                + F4::splat(range);
+            let pi = V4::from_fn(|l| s.position[i[l]]);
+            let pj = V4::from_fn(|l| s.position[j[l] as usize]);
+            s.separation_lanes(pi, pj)
+                .length_squared()
+                .lt(reach * reach)
+                .bits()
+        } else {
+            (0..4)
+                .map(|l| u32::from(touching(s, range, i[l], j[l])) << l)
+                .sum()
         };
-        let p = s.position[i];
-        let r = s.radius[i];
-        // A frozen grain has an infinite mass (zero inverse) in the snapshot. A contact between
-        // two frozen grains, or a frozen grain and a wall, moves nothing, and its
-        // reduced mass (hence a mass-scaled dashpot) would be infinite: none is made.
-        let frozen = s.inverse_mass[i] == 0.0;
-        let k = i - base;
-        let rows = candidates.first[k] as usize..candidates.first[k + 1] as usize;
-        for (&j, &gap) in candidates.partner[rows.clone()]
-            .iter()
-            .zip(&candidates.gap[rows])
-        {
-            // Too far at the build to have come within reach since, and so are the rest
-            // (the partners are in increasing order of their gap).
-            if gap > gap_threshold {
-                break;
+        within &= (1 << partner.len()) - 1;
+        while within != 0 {
+            let l = within.trailing_zeros() as usize;
+            within &= within - 1;
+            let (i, j) = (i[l], j[l]);
+            if !(frozen(i) && frozen(j as usize)) {
+                touch(i, j, s.material[j as usize]);
             }
-            let j = j as usize;
-            if frozen && s.inverse_mass[j] == 0.0 {
+        }
+    }
+    if !s.walls.is_empty() {
+        for i in base..base + entries.len() {
+            if frozen(i) {
                 continue;
             }
-            let reach = r + s.radius[j] + range;
-            if s.separation(p, s.position[j]).length_squared() < reach * reach {
-                touching(new, j as u32, s.material[j]);
-            }
-        }
-        // The candidates come nearest first; the new pairs are listed by partner index,
-        // as a list in index order gives them, so that where and when the list was built
-        // never shows in the order contacts are made (and forces summed).
-        if new.len() > first_new + 1 {
-            new[first_new..].sort_unstable_by_key(|&(_, j)| j);
-        }
-        if !frozen {
             for (w, wall) in s.walls.iter().enumerate() {
-                if (p - wall.point).dot(wall.normal) < r + range {
-                    touching(new, ContactBodies::wall_code(w), wall.material);
+                let code = ContactBodies::wall_code(w);
+                if touching(s, range, i, code) {
+                    touch(i, code, wall.material);
                 }
             }
         }
-        // Most grains' contacts were all found again: nothing to drop.
-        if found.all(list.len()) {
-            continue;
-        }
-        let mut k = 0;
-        list.retain(|e| {
-            let again = found.get(k);
-            k += 1;
-            if again {
-                return true;
-            }
-            // A pair that stopped touching keeps its contact for one more
-            // evaluation (with no force), so that the law books the work done in
-            // the step in which the contact ended; it goes at the next pass.
-            let acted = view
-                .get::<ContactGeometry>(e.contact())
-                .zip(view.get::<ContactForce>(e.contact()))
-                .is_some_and(|(g, f)| f.is_active(g));
-            if !acted {
-                gone.push(e.contact());
-            }
-            acted
-        });
     }
-}
-
-/// Which of a grain's index entries a pass found again: one bit per entry for the first
-/// 64 (a grain is the first body of a handful of contacts, so no memory is touched), a
-/// flag per entry past them, for a large grain among many small ones.
-#[derive(Default)]
-struct FoundMarks {
-    /// Entries 0..64.
-    bits: u64,
-    /// Entries from 64 on (empty unless a grain has more).
-    spill: Vec<bool>,
-}
-
-impl FoundMarks {
-    /// Clears the marks for a grain with `len` entries.
-    #[inline]
-    fn reset(&mut self, len: usize) {
-        self.bits = 0;
-        if len > 64 || !self.spill.is_empty() {
-            self.spill.clear();
-            self.spill.resize(len.saturating_sub(64), false);
-        }
-    }
-
-    /// Marks entry `k` found.
-    #[inline]
-    fn mark(&mut self, k: usize) {
-        if k < 64 {
-            self.bits |= 1 << k;
-        } else {
-            self.spill[k - 64] = true;
-        }
-    }
-
-    /// Whether entry `k` was found.
-    #[inline]
-    fn get(&self, k: usize) -> bool {
-        if k < 64 {
-            self.bits >> k & 1 == 1
-        } else {
-            self.spill[k - 64]
-        }
-    }
-
-    /// Whether all of a grain's `len` entries were found.
-    #[inline]
-    fn all(&self, len: usize) -> bool {
-        let low = if len >= 64 {
-            u64::MAX
-        } else {
-            (1u64 << len) - 1
-        };
-        self.bits == low && self.spill.iter().all(|&again| again)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::FoundMarks;
-
-    /// The marks of a grain with more entries than bits (a large grain among small ones)
-    /// and of the next grain with a handful: each entry is found only when marked.
-    #[test]
-    fn found_marks_past_64_entries() {
-        let mut found = FoundMarks::default();
-        found.reset(70);
-        for k in (0..70).filter(|&k| k != 66) {
-            found.mark(k);
-        }
-        assert!(!found.all(70));
-        assert!(found.get(65) && !found.get(66) && found.get(63));
-        found.mark(66);
-        assert!(found.all(70));
-        found.reset(5);
-        assert!(!found.all(5) && !found.get(0));
-        (0..5).for_each(|k| found.mark(k));
-        assert!(found.all(5));
-        found.reset(64);
-        (0..63).for_each(|k| found.mark(k));
-        assert!(!found.all(64));
-        found.mark(63);
-        assert!(found.all(64));
-    }
+    // By grain, then partner (wall codes after every grain's index), as one pass over
+    // the grains in index order would list them: where and when the list was built never
+    // shows in the order contacts are made (and forces summed).
+    new.sort_unstable();
 }

@@ -3,10 +3,15 @@
 //! build; every other step tests just those candidates. Exact: a pair that comes within
 //! reach must have been within reach + skin at the last build, since neither grain has
 //! moved more than skin/2.
+//!
+//! A build tests the grains of the 27 cells around each grain four at a time, in lanes,
+//! and keeps each chunk's pairs sorted by their gap, so that the narrow phase's pairs of a
+//! step are a prefix of the list.
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rayon::prelude::*;
+use talus_core::lanes::{F4, V4};
 use talus_core::periodic::{LeesEdwards, PeriodicBox};
 use talus_core::snapshot::GrainSnapshot;
 
@@ -18,20 +23,62 @@ pub const CHUNK: usize = 256;
 /// Skin as a fraction of the largest diameter (LAMMPS's chute benchmark: 0.1 of d).
 pub const SKIN_FRACTION: f64 = 0.1;
 
-/// The candidate partners of one chunk of [`CHUNK`] grains, grain by grain (compressed
-/// rows): the partners of the chunk's `k`-th grain are `partner[first[k]..first[k + 1]]`,
-/// dense indices j > i in increasing order of their gap at the build (then of index),
-/// each with that gap.
+/// The candidate pairs (i, j), j > i, of the grains i of one chunk of [`CHUNK`] grains, in
+/// increasing order of their gap at the build (then of i, then of j): the pairs that may
+/// be within reach at a step are a prefix of the list, which the narrow phase tests four
+/// at a time without looking at grain boundaries.
 #[derive(Default, Clone, Debug)]
 pub struct CandidateChunk {
-    /// Where each grain's partners start in `partner`, plus one final entry.
-    pub(crate) first: Vec<u32>,
-    /// Candidate partners.
+    /// Each pair's first grain, as its offset in the chunk (dense index − first index of
+    /// the chunk).
+    pub(crate) local: Vec<u8>,
+    /// Each pair's second grain (dense index j > i).
     pub(crate) partner: Vec<u32>,
-    /// Each candidate's gap at the build (distance less the reach of the pair), in units
-    /// of [`GAP_UNITS`] per skin, rounded down, 0 for pairs already within reach: a pair
-    /// cannot be within reach while twice the largest move since the build is below its gap.
+    /// Each pair's gap at the build (distance less the reach of the pair), in units of
+    /// [`GAP_UNITS`] per skin, rounded down, 0 for pairs already within reach: a pair
+    /// cannot be within reach while twice the largest move since the build is below its
+    /// gap. Increasing.
     pub(crate) gap: Vec<u16>,
+}
+
+// A chunk's grains are told apart by a byte.
+const _: () = assert!(CHUNK <= 256);
+
+impl CandidateChunk {
+    /// Number of candidate pairs.
+    pub fn len(&self) -> usize {
+        self.partner.len()
+    }
+
+    /// Whether the chunk has no candidate pair.
+    pub fn is_empty(&self) -> bool {
+        self.partner.is_empty()
+    }
+
+    /// How many pairs, from the first, have a gap at most `threshold`
+    /// ([`NeighbourList::gap_threshold`]): the only ones that may be within reach.
+    #[inline]
+    pub fn within_threshold(&self, threshold: u16) -> usize {
+        self.gap.partition_point(|&gap| gap <= threshold)
+    }
+
+    /// Fills the chunk from pair keys ([`pair_key`]), sorting them.
+    fn fill(&mut self, keys: &mut [u64]) {
+        keys.sort_unstable();
+        self.local.clear();
+        self.partner.clear();
+        self.gap.clear();
+        self.local.extend(keys.iter().map(|&k| (k >> 32) as u8));
+        self.partner.extend(keys.iter().map(|&k| k as u32));
+        self.gap.extend(keys.iter().map(|&k| (k >> 40) as u16));
+    }
+}
+
+/// A candidate pair as one sortable number: gap, then first grain's offset in its chunk,
+/// then partner.
+#[inline]
+fn pair_key(gap: u16, local: usize, partner: u32) -> u64 {
+    (u64::from(gap) << 40) | ((local as u64) << 32) | u64::from(partner)
 }
 
 /// Gap quanta per skin in [`CandidateChunk::gap`].
@@ -153,49 +200,33 @@ pub fn update_neighbour_list(
         .par_iter_mut()
         .enumerate()
         .for_each(|(chunk, out)| {
-            out.first.clear();
-            out.partner.clear();
-            out.gap.clear();
+            let mut keys: Vec<u64> = Vec::new();
             let mut pairs: Vec<(u32, u16)> = Vec::new();
-            for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
-                out.first.push(out.partner.len() as u32);
-                pairs.clear();
+            let base = chunk * CHUNK;
+            for i in base..(base + CHUNK).min(n) {
                 let p = s.position[i];
-                let r = s.radius[i];
                 let c = grid.coords(p);
                 if let Some(b) = s.periodic()
                     && let Some(shear) = &b.shear
                 {
+                    pairs.clear();
                     sheared_candidates(s, grid, b, shear, i, c, range, skin, &mut pairs);
-                } else {
-                    let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
-                    for &cz in zs.cells() {
-                        for &cy in ys.cells() {
-                            for &cx in xs.cells() {
-                                for &j in grid.cell_grains(grid.index([cx, cy, cz])) {
-                                    if (j as usize) <= i {
-                                        continue;
-                                    }
-                                    let reach = r + s.radius[j as usize] + range;
-                                    let d = s.separation(p, s.position[j as usize]);
-                                    let dist_sq = d.length_squared();
-                                    if dist_sq < (reach + skin) * (reach + skin) {
-                                        pairs.push((j, gap_quanta(dist_sq, reach, skin)));
-                                    }
-                                }
-                            }
+                    keys.extend(pairs.iter().map(|&(j, gap)| pair_key(gap, i - base, j)));
+                    continue;
+                }
+                let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
+                for &cz in zs.cells() {
+                    for &cy in ys.cells() {
+                        for &cx in xs.cells() {
+                            let cell = grid.cell_grains(grid.index([cx, cy, cz]));
+                            candidates_in_cell(s, i, cell, range, skin, |j, gap| {
+                                keys.push(pair_key(gap, i - base, j));
+                            });
                         }
                     }
                 }
-                // Each grain's partners nearest first (by gap, then index): the narrow
-                // phase stops at the first partner too far to be within reach, instead of
-                // testing and skipping the whole skin shell at every step (it lists the
-                // new touching pairs by index, whatever the order here).
-                pairs.sort_unstable_by_key(|&(j, gap)| (gap, j));
-                out.partner.extend(pairs.iter().map(|&(j, _)| j));
-                out.gap.extend(pairs.iter().map(|&(_, g)| g));
             }
-            out.first.push(out.partner.len() as u32);
+            out.fill(&mut keys);
         });
     list.reference.clear();
     list.reference.extend_from_slice(&s.position);
@@ -206,6 +237,47 @@ pub fn update_neighbour_list(
         .map_or(0.0, |shear| shear.offset);
     list.builds += 1;
     list.closing = 0.0;
+}
+
+/// The grains j > i of one cell (`cell`, dense indices) within reach + skin of grain `i`,
+/// each handed to `found` with its gap quanta; four at a time, in a box without a
+/// sheared seam. The same test, bit for bit, as one pair at a time.
+#[inline]
+fn candidates_in_cell(
+    s: &GrainSnapshot,
+    i: usize,
+    cell: &[u32],
+    range: f64,
+    skin: f64,
+    mut found: impl FnMut(u32, u16),
+) {
+    let (p, r) = (V4::splat(s.position[i]), F4::splat(s.radius[i]));
+    let (range4, skin4) = (F4::splat(range), F4::splat(skin));
+    for batch in cell.chunks(4) {
+        // A short batch repeats its first grain in the lanes left over.
+        let j: [u32; 4] = std::array::from_fn(|l| *batch.get(l).unwrap_or(&batch[0]));
+        let after: u32 = (0..4)
+            .map(|l| u32::from(j[l] as usize > i && l < batch.len()) << l)
+            .sum();
+        if after == 0 {
+            continue;
+        }
+        let reach = r + F4::from_fn(|l| s.radius[j[l] as usize]) + range4;
+        let dist_sq = s
+            .separation_lanes(p, V4::from_fn(|l| s.position[j[l] as usize]))
+            .length_squared();
+        let limit = reach + skin4;
+        let mut near = dist_sq.lt(limit * limit).bits() & after;
+        if near == 0 {
+            continue;
+        }
+        let (dist_sq, reach) = (dist_sq.to_array(), reach.to_array());
+        while near != 0 {
+            let l = near.trailing_zeros() as usize;
+            found(j[l], gap_quanta(dist_sq[l], reach[l], skin));
+            near &= near - 1;
+        }
+    }
 }
 
 /// Candidate partners j > i of grain `i` (in cell `c`) in a Lees–Edwards box, with their

@@ -149,6 +149,23 @@ pub struct ContactEnergyPartials {
     pub chunks: Vec<ContactEnergySums>,
 }
 
+/// The contacts that carried no force at their last evaluation
+/// ([`ContactForce::is_active`] false: the bodies had parted, and the law had booked the
+/// step in which they did), by their bodies' codes in the snapshot ([`ContactBodies`]
+/// `a` and `b`). The force loops append to it; the next narrow phase reads it, since these
+/// are the only contacts it may end (a contact that acted is kept for one more
+/// evaluation, touching or not), and empties it.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct IdleContacts {
+    /// Bodies of each idle contact, in the snapshot of `layout`, in no particular order.
+    pub pairs: Vec<[u32; 2]>,
+    /// The snapshot layout ([`talus_core::snapshot::GrainSnapshot::layout`]) of `pairs`.
+    pub layout: u32,
+    /// Whether a force pass ran since the last narrow phase (so that `pairs` accounts for
+    /// every contact then in the index).
+    pub evaluated: bool,
+}
+
 /// The law's per-contact history, e.g. a tangential spring.
 #[derive(Component, Clone, Debug, Default)]
 pub struct LawState<H: Send + Sync + 'static>(pub H);

@@ -101,6 +101,7 @@ impl Plugin for ContactPlugin {
             n_materials: n,
         });
         sim.world.insert_resource(ContactEnergyPartials::default());
+        sim.world.insert_resource(IdleContacts::default());
         sim.world
             .insert_resource(crate::order::ContactTableSorts::default());
         sim.add_system(
@@ -123,6 +124,7 @@ pub fn evaluate_law<L: ContactLaw>(
     booking: Option<Res<ContactEnergyBooking>>,
     lane_forms: Option<Res<LaneForms>>,
     mut partials: ResMut<ContactEnergyPartials>,
+    mut idle: ResMut<IdleContacts>,
     mut contacts: Query<(
         &Contact,
         &mut LawState<L::History>,
@@ -216,6 +218,10 @@ pub fn evaluate_law<L: ContactLaw>(
     });
     let lanes = lanes.as_ref();
     let partials = &mut partials.chunks;
+    let idle = &mut *idle;
+    idle.layout = snapshot.layout;
+    idle.evaluated = true;
+    let mut outcomes: Vec<(ContactEnergySums, Vec<[u32; 2]>)> = Vec::new();
     for (c, mut h, mut g, mut f, mut d) in contacts
         .contiguous_iter_mut()
         .expect("contact query is dense")
@@ -225,7 +231,8 @@ pub fn evaluate_law<L: ContactLaw>(
         let f = f.bypass_change_detection();
         let d = d.bypass_change_detection();
         // An indexed parallel iterator extends the list in chunk order.
-        partials.par_extend(
+        outcomes.clear();
+        outcomes.par_extend(
             c.par_chunks(ENERGY_CHUNK_LEN)
                 .zip(h.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .zip(g.par_chunks_mut(ENERGY_CHUNK_LEN))
@@ -233,13 +240,18 @@ pub fn evaluate_law<L: ContactLaw>(
                 .zip(d.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .with_max_len(FORCE_CHUNKS_PER_JOB)
                 .map(|((((c, h), g), f), d)| {
-                    to_global(if book {
+                    let (sums, idle) = if book {
                         evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d)
                     } else {
                         evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d)
-                    })
+                    };
+                    (to_global(sums), idle)
                 }),
         );
+        for (sums, pairs) in outcomes.drain(..) {
+            partials.push(sums);
+            idle.pairs.extend(pairs);
+        }
     }
 }
 
@@ -260,7 +272,7 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
     g: &mut [ContactGeometry],
     f: &mut [ContactForce],
     d: &mut [ContactBodies],
-) -> ContactEnergySums {
+) -> (ContactEnergySums, Vec<[u32; 2]>) {
     let mut sums = ContactEnergySums::default();
     let n = c.len();
     let (h, g, f, d) = (&mut h[..n], &mut g[..n], &mut f[..n], &mut d[..n]);
@@ -298,7 +310,17 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
         prefetch(d, k + PREFETCH_AHEAD);
         evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], &mut sums, BOOK);
     }
-    sums
+    // The contacts that carried no force: the few the next narrow phase may end. (Every
+    // contact is counted in `sums.active` or listed here.)
+    let mut idle = Vec::new();
+    if sums.active < n {
+        for (g, (f, d)) in g.iter().zip(f.iter().zip(d.iter())) {
+            if !f.is_active(g) {
+                idle.push([d.a, d.b]);
+            }
+        }
+    }
+    (sums, idle)
 }
 
 /// The scalar evaluation of one contact (the force loop's closure): kinematics, the
