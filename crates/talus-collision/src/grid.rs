@@ -53,6 +53,12 @@ impl CellGrid {
         &self.sorted[self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize]
     }
 
+    /// Grains of the cells `first..=last` (dense cell indices), one run of `sorted`.
+    #[inline]
+    pub fn cells_grains(&self, first: usize, last: usize) -> &[u32] {
+        &self.sorted[self.cell_start[first] as usize..self.cell_start[last + 1] as usize]
+    }
+
     /// Rebuilds the grid over the grains of a snapshot.
     pub fn rebuild(&mut self, s: &GrainSnapshot) {
         self.rebuild_with_margin(s, 0.0);
