@@ -163,9 +163,17 @@ fn not_booked() -> f64 {
 pub struct WallClock {
     /// Whole run (excluding scene building), s.
     pub total: f64,
-    /// Per stage, s.
+    /// The pass that evaluates the initial forces (first neighbour list, every initial
+    /// contact made), s.
+    #[serde(default)]
+    pub priming: f64,
+    /// The time steps themselves, s: `total` less the priming pass, the report samples
+    /// and the last good state written at each (LAMMPS's "loop time").
+    #[serde(default)]
+    pub stepping: f64,
+    /// Per stage, over the time steps (not the priming pass), s.
     pub stages: BTreeMap<String, f64>,
-    /// Grain-steps per second.
+    /// Grain-steps per second of the time steps: grains × steps / `stepping`.
     pub grain_steps_per_second: f64,
 }
 

@@ -216,13 +216,21 @@ pub fn run_scene(
     // The last good state lives on disk, rewritten at every report, not in memory.
     let mut last_good = BinaryStateFile::new(out_dir.join("last_good_state.bin"));
     let primed = sim.prime();
+    let priming = start.elapsed().as_secs_f64();
+    // The stage timings are those of the steps; the priming pass has its own figure.
+    sim.world.resource_mut::<StageTimings>().clear();
+    let mut stepping = 0.0;
+    let first_step = sim.step_count();
     if let Err(b) = primed {
         blow_up = Some(b);
     } else {
         samples.push(ReportSample::take(&sim.world));
         keep_last_good(&mut last_good, &mut sim.world, &built.name, options.quiet);
         for step in sim.step_count() + 1..=total_steps {
-            if let Err(b) = sim.step() {
+            let step_start = Instant::now();
+            let stepped = sim.step();
+            stepping += step_start.elapsed().as_secs_f64();
+            if let Err(b) = stepped {
                 blow_up = Some(b);
                 break;
             }
@@ -281,12 +289,14 @@ pub fn run_scene(
         samples,
         wall_clock: WallClock {
             total: elapsed,
+            priming,
+            stepping,
             stages: Stage::ALL
                 .iter()
                 .map(|s| (s.name().to_string(), timings.get(*s)))
                 .collect(),
-            grain_steps_per_second: built.grain_count as f64 * steps_run as f64
-                / elapsed.max(1e-12),
+            grain_steps_per_second: built.grain_count as f64 * steps_run.saturating_sub(first_step) as f64
+                / stepping.max(1e-12),
         },
         blow_up: None,
     };

@@ -126,6 +126,11 @@ impl StageTimings {
             .map(|(_, t)| *t)
             .unwrap_or(0.0)
     }
+
+    /// Forgets the seconds accumulated so far (a stage being timed goes on being timed).
+    pub fn clear(&mut self) {
+        self.seconds.clear();
+    }
 }
 
 /// A run stopped because the state became unphysical.
