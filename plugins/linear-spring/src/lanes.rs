@@ -1,14 +1,14 @@
 //! The lane form of the linear spring–dashpot law: four persistent contacts at once.
 //!
-//! It covers the contacts a dense flow is made of, those that overlapped at their last
-//! evaluation and still overlap (`previous_overlap > 0`, `overlap > 0`), with the same
-//! operations in the same order as [`LinearSpring::evaluate`](crate::LinearSpring), so
-//! that each lane has the bits of the scalar form (`tests/lanes.rs` checks it). It leaves
-//! the rest to the scalar form: a contact's first evaluation (the onset weight), the
-//! evaluation after the bodies part (the release pull), and the one after that.
+//! Every branch of [`LinearSpring::evaluate`](crate::LinearSpring) is here (a contact's
+//! first evaluation with its onset weight, the persistent contact, sliding or not, the
+//! release after the bodies part), with the same operations in the same order, each
+//! lane taking its own branch by a mask, so that each lane has the bits of the scalar
+//! form (`tests/lanes.rs` checks it). The rarer branches are computed only when a lane of
+//! the four needs them.
 
 use talus_contact::{ContactKinematicsLanes, LaneResponse};
-use talus_core::lanes::{F4, M4, V4};
+use talus_core::lanes::{F4, V4};
 
 use crate::{LinearParams, TangentialSpring};
 
@@ -61,27 +61,124 @@ fn lanes_of<T>(values: &[&T; 4], f: impl Fn(&T) -> f64) -> F4 {
     F4::from_fn(|k| f(values[k]))
 }
 
-/// Evaluates the persistent contacts among the four lanes (see the module doc); `lanes`
-/// are those the core offers. Returns the lanes evaluated and their response.
+/// [`crate::onset_weight`] in lanes: 1 where the contact overlapped before this step or
+/// did not approach by more than its overlap, the fixed point of the scalar form's three
+/// passes elsewhere. `damping_force` is the dashpot's force, positive repulsive.
+#[inline(always)]
+fn onset_weight(
+    kin: &ContactKinematicsLanes,
+    k: F4,
+    damping_force: F4,
+    dt: f64,
+    delta: F4,
+) -> F4 {
+    let (zero, one) = (F4::zero(), F4::splat(1.0));
+    let approach = -kin.normal.dot(kin.displacement);
+    let settled = kin.previous_overlap.gt(zero).or(approach.le(delta));
+    if settled.bits() == 0xF {
+        return one;
+    }
+    let mut weight = F4::splat(0.5) * (one + delta / approach);
+    let slowing = F4::splat(dt * dt) / kin.effective_mass;
+    for _ in 0..3 {
+        let next_approach = approach - slowing * (k * delta * weight + damping_force);
+        let ratio = (delta + next_approach) / (approach + next_approach);
+        // f64::clamp(0, 1).
+        let ratio = ratio.lt(zero).select(zero, ratio);
+        let ratio = ratio.gt(one).select(one, ratio);
+        weight = (next_approach + approach).gt(zero).select(ratio, weight);
+    }
+    settled.select(one, weight)
+}
+
+/// The release of the lanes whose bodies no longer overlap, as the scalar form's first
+/// branch computes it: the normal spring's pull ([`crate::normal_spring_release`]), with its
+/// force, energies and the history it leaves.
+struct Release {
+    pull: F4,
+    elastic_error: F4,
+    dissipated: [F4; 3],
+}
+
+#[inline(always)]
+fn release(
+    kin: &ContactKinematicsLanes,
+    k: F4,
+    kt: F4,
+    history: &Old,
+    trial: V4,
+    tangential_displacement: V4,
+    book: bool,
+) -> Release {
+    let zero = F4::zero();
+    let (half, minus_half) = (F4::splat(0.5), F4::splat(-0.5));
+    let displacement = kin.displacement;
+    let previous = kin.previous_normal;
+    let old = previous * history.normal_spring;
+    let was_touching = kin.previous_overlap.gt(zero);
+    let overlapped = was_touching.select(kin.previous_overlap, zero);
+    let old_potential = half * k * (overlapped * overlapped);
+    let opening = kin.normal.dot(displacement);
+    let excess = old.dot(displacement) - F4::splat(2.0) * old_potential;
+    let asked = excess / (F4::splat(2.0) * opening);
+    let old_length = old.length();
+    // f64::min of a positive pull and a length.
+    let capped = old_length.lt(asked).select(old_length, asked);
+    let pulls = was_touching.and(opening.gt(zero)).and(excess.gt(zero));
+    let pull = pulls.select(-capped, zero);
+    let mut out = Release {
+        pull,
+        elastic_error: zero,
+        dissipated: [zero; 3],
+    };
+    if book {
+        let normal_error =
+            half * (old + kin.normal * pull).dot(displacement) - old_potential;
+        let tangential_error = half
+            * kt
+            * (trial.length_squared()
+                - history.spring.length_squared()
+                - (history.spring + trial).dot(displacement));
+        out.elastic_error = normal_error + tangential_error;
+        out.dissipated = [
+            zero + minus_half * (previous * history.normal_dashpot).dot(displacement),
+            zero + minus_half * history.tangential_dashpot.dot(displacement),
+            zero + half
+                * kt
+                * (trial - tangential_displacement + V4::zero()).dot(trial - V4::zero()),
+        ];
+    }
+    out
+}
+
+/// The history of four contacts before the step, in lanes.
+struct Old {
+    spring: V4,
+    tangential_dashpot: V4,
+    normal_dashpot: F4,
+    normal_spring: F4,
+}
+
+/// Evaluates the lanes `lanes` of four contacts (see the module doc). Returns the lanes
+/// evaluated (all of `lanes`) and their response.
 #[inline(always)]
 pub(crate) fn evaluate(
     p: [&LinearParams; 4],
     kin: &ContactKinematicsLanes,
     history: [&mut TangentialSpring; 4],
     lanes: u32,
+    dt: f64,
     book: bool,
 ) -> (u32, LaneResponse) {
     let zero = F4::zero();
-    let delta = kin.overlap;
-    let persistent: M4 = delta
-        .gt(zero)
-        .and(kin.previous_overlap.gt(zero))
-        .and(kin.previous_normal.eq(V4::zero()).not());
-    let evaluated = persistent.bits() & lanes;
     let mut out = LaneResponse::default();
-    if evaluated == 0 {
+    if lanes == 0 {
         return (0, out);
     }
+    let delta = kin.overlap;
+    // The scalar form releases where `delta <= 0` (not where `!(delta > 0)`: a NaN
+    // overlap goes the contact's way there too).
+    let released = delta.le(zero);
     let n = kin.normal;
     let k = lanes_of(&p, |p| p.normal_stiffness);
     let mass = kin.effective_mass.to_array();
@@ -90,19 +187,22 @@ pub(crate) fn evaluate(
             .coefficient(p[l].normal_stiffness, mass[l])
     });
     let vn = kin.normal_velocity;
-    // The onset weight is 1 for a contact that overlapped before this step.
-    let spring_force = k * delta;
-    let fn_mag = spring_force - c * vn;
-    let old_spring = V4::from_fn(|l| history[l].spring);
-    let old_tangential_dashpot = V4::from_fn(|l| history[l].tangential_dashpot);
+    let old = Old {
+        spring: V4::from_fn(|l| history[l].spring),
+        tangential_dashpot: V4::from_fn(|l| history[l].tangential_dashpot),
+        normal_dashpot: F4::from_fn(|l| history[l].normal_dashpot),
+        normal_spring: F4::from_fn(|l| history[l].normal_spring),
+    };
     let normal_damping = -c * vn;
+    let spring_force = k * delta * onset_weight(kin, k, normal_damping, dt, delta);
+    let fn_mag = spring_force - c * vn;
 
     let friction = lanes_of(&p, |p| p.friction);
     let sliding = friction.gt(zero);
     let kt = lanes_of(&p, |p| p.tangential_stiffness);
     let ct = lanes_of(&p, |p| p.tangential_damping_ratio) * c;
     let vt = kin.tangential_velocity;
-    let trial = advance_tangential_spring(old_spring, kin);
+    let trial = advance_tangential_spring(old.spring, kin);
     let ft_trial = trial * -kt - vt * ct;
     let cap = friction * fn_mag.abs();
     let ft_len = ft_trial.length();
@@ -113,30 +213,31 @@ pub(crate) fn evaluate(
     let ft = sliding.select3(slip.select3(ft_capped, ft_trial), V4::zero());
     let tangential_dashpot = vt * -ct;
     out.force = n * fn_mag + ft;
+    let displacement = kin.displacement;
+    let tangential_displacement = displacement - n * n.dot(displacement);
 
     if book {
         let half = F4::splat(0.5);
         let minus_half = F4::splat(-0.5);
-        let displacement = kin.displacement;
-        let tangential_displacement = displacement - n * n.dot(displacement);
         let previous = kin.previous_normal;
-        let old_normal_spring = previous * F4::from_fn(|l| history[l].normal_spring);
-        let old_normal_dashpot = previous * F4::from_fn(|l| history[l].normal_dashpot);
+        let old_normal_spring = previous * old.normal_spring;
+        let old_normal_dashpot = previous * old.normal_dashpot;
         let half_k = half * k;
         let potential = half_k * delta * delta;
+        let overlapped = kin.previous_overlap.gt(zero).select(kin.previous_overlap, zero);
         let normal_error = half * (old_normal_spring + n * spring_force).dot(displacement)
             + potential
-            - half_k * (kin.previous_overlap * kin.previous_overlap);
+            - half_k * (overlapped * overlapped);
         let normal_dashpot_work =
             zero + minus_half * (old_normal_dashpot + n * normal_damping).dot(displacement);
         let half_kt = half * kt;
         let slip_work = half_kt * (trial - tangential_displacement + xi).dot(trial - xi);
         let tangential_error = half_kt
             * (trial.length_squared()
-                - old_spring.length_squared()
-                - (old_spring + trial).dot(displacement));
+                - old.spring.length_squared()
+                - (old.spring + trial).dot(displacement));
         let tangential_dashpot_work = zero
-            + minus_half * (old_tangential_dashpot + tangential_dashpot).dot(displacement);
+            + minus_half * (old.tangential_dashpot + tangential_dashpot).dot(displacement);
         out.elastic_energy =
             sliding.select(potential + half_kt * xi.length_squared(), potential);
         out.integration_error =
@@ -146,13 +247,31 @@ pub(crate) fn evaluate(
         out.dissipated[2] = sliding.and(slip).select(zero + slip_work, zero);
     }
 
-    let spring = sliding.select3(xi, old_spring).to_array();
-    let tangential_dashpot = sliding
-        .select3(tangential_dashpot, old_tangential_dashpot)
-        .to_array();
-    let (normal_spring, normal_dashpot) = (spring_force.to_array(), normal_damping.to_array());
+    let mut spring = sliding.select3(xi, old.spring);
+    let mut tangential_dashpot = sliding.select3(tangential_dashpot, old.tangential_dashpot);
+    let (mut normal_spring, mut normal_dashpot) = (spring_force, normal_damping);
+    if released.any() {
+        // Without friction the spring never held anything (nor has a stiffness to release
+        // it with).
+        let kt = sliding.select(kt, zero);
+        let r = release(kin, k, kt, &old, trial, tangential_displacement, book);
+        out.force = released.select3(n * r.pull, out.force);
+        if book {
+            out.elastic_energy = released.select(zero, out.elastic_energy);
+            out.integration_error = released.select(r.elastic_error, out.integration_error);
+            for (total, d) in out.dissipated.iter_mut().zip(r.dissipated) {
+                *total = released.select(d, *total);
+            }
+        }
+        spring = released.select3(V4::zero(), spring);
+        tangential_dashpot = released.select3(V4::zero(), tangential_dashpot);
+        normal_dashpot = released.select(zero, normal_dashpot);
+        normal_spring = released.select(r.pull, normal_spring);
+    }
+    let (spring, tangential_dashpot) = (spring.to_array(), tangential_dashpot.to_array());
+    let (normal_spring, normal_dashpot) = (normal_spring.to_array(), normal_dashpot.to_array());
     for (l, h) in history.into_iter().enumerate() {
-        if evaluated >> l & 1 == 1 {
+        if lanes >> l & 1 == 1 {
             *h = TangentialSpring {
                 spring: spring[l],
                 tangential_dashpot: tangential_dashpot[l],
@@ -161,5 +280,5 @@ pub(crate) fn evaluate(
             };
         }
     }
-    (evaluated, out)
+    (lanes, out)
 }

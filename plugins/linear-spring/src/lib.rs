@@ -174,10 +174,10 @@ impl ContactLaw for LinearSpring {
         kin: &ContactKinematicsLanes,
         history: [&mut TangentialSpring; 4],
         lanes: u32,
-        _dt: f64,
+        dt: f64,
         book: bool,
     ) -> (u32, LaneResponse) {
-        lanes::evaluate(params, kin, history, lanes, book)
+        lanes::evaluate(params, kin, history, lanes, dt, book)
     }
 
     #[inline]
