@@ -19,7 +19,7 @@ use talus_contact::{
     IdleContacts,
     systems::{ContactLawTable, LawSlot, RecycleContacts},
 };
-use talus_core::lanes::{F4, V4};
+use talus_core::lanes::F4;
 use talus_core::resources::Clock;
 use talus_core::snapshot::GrainSnapshot;
 
@@ -519,19 +519,14 @@ fn narrow_chunk(
     let (local, partner) = (&candidates.local[..tested], &candidates.partner[..tested]);
     // Four pairs at a time where the separation is the plain nearest image (the same bits
     // as one at a time); across a sheared seam, one at a time.
-    let lanes = !s.is_sheared();
-    for (local, partner) in local.chunks(4).zip(partner.chunks(4)) {
-        // A short batch repeats its first pair in the lanes left over.
-        let i: [usize; 4] =
-            std::array::from_fn(|l| base + *local.get(l).unwrap_or(&local[0]) as usize);
-        let j: [u32; 4] = std::array::from_fn(|l| *partner.get(l).unwrap_or(&partner[0]));
-        let mut within = if lanes {
-            let reach = F4::from_fn(|l| s.radius[i[l]])
-                + F4::from_fn(|l| s.radius[j[l] as usize])
-                + F4::splat(range);
-            let pi = V4::from_fn(|l| s.position[i[l]]);
-            let pj = V4::from_fn(|l| s.position[j[l] as usize]);
-            s.separation_lanes(pi, pj)
+    let image = (!s.is_sheared()).then(|| s.image_lanes());
+    let range4 = F4::splat(range);
+    let mut test = |i: [usize; 4], j: [u32; 4], live: u32| {
+        let mut within = if let Some(image) = &image {
+            let (a, b) = (s.gather4(i), s.gather4(j.map(|j| j as usize)));
+            let reach = a.radius + b.radius + range4;
+            image
+                .apply(a.position - b.position)
                 .length_squared()
                 .lt(reach * reach)
                 .bits()
@@ -540,7 +535,7 @@ fn narrow_chunk(
                 .map(|l| u32::from(touching(s, range, i[l], j[l])) << l)
                 .sum()
         };
-        within &= (1 << partner.len()) - 1;
+        within &= live;
         while within != 0 {
             let l = within.trailing_zeros() as usize;
             within &= within - 1;
@@ -549,6 +544,22 @@ fn narrow_chunk(
                 touch(i, j, s.material[j as usize]);
             }
         }
+    };
+    let (locals, partners) = (local.chunks_exact(4), partner.chunks_exact(4));
+    let (local_rest, partner_rest) = (locals.remainder(), partners.remainder());
+    for (local, partner) in locals.zip(partners) {
+        let local: [u8; 4] = local.try_into().expect("four pairs");
+        let partner: [u32; 4] = partner.try_into().expect("four pairs");
+        test(local.map(|l| base + l as usize), partner, 0xF);
+    }
+    if !local_rest.is_empty() {
+        // The last pairs, with the first of them repeated in the lanes left over.
+        let pad = |l: usize| l.min(local_rest.len() - 1);
+        test(
+            std::array::from_fn(|l| base + local_rest[pad(l)] as usize),
+            std::array::from_fn(|l| partner_rest[pad(l)]),
+            (1 << local_rest.len()) - 1,
+        );
     }
     if !s.walls.is_empty() {
         for i in base..base + entries.len() {

@@ -12,7 +12,7 @@ use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rayon::prelude::*;
 use talus_core::lanes::{F4, V4};
-use talus_core::periodic::{LeesEdwards, PeriodicBox};
+use talus_core::periodic::{ImageLanes, LeesEdwards, NearestImage, PeriodicBox};
 use talus_core::snapshot::GrainSnapshot;
 
 use crate::grid::CellGrid;
@@ -224,6 +224,9 @@ pub fn update_neighbour_list(
             let (mut keys, mut scratch): (Vec<u64>, Vec<u64>) = (Vec::new(), Vec::new());
             let mut pairs: Vec<(u32, u16)> = Vec::new();
             let base = chunk * CHUNK;
+            // (Only used where the box is not sheared.)
+            let image = NearestImage::default().lanes();
+            let image = if s.is_sheared() { image } else { s.image_lanes() };
             for i in base..(base + CHUNK).min(n) {
                 let p = s.position[i];
                 let c = grid.coords(p);
@@ -245,7 +248,7 @@ pub fn update_neighbour_list(
                         let row = grid.index([0, cy, cz]);
                         for &(first, last) in runs.iter().flatten() {
                             let grains = grid.cells_grains(row + first, row + last);
-                            candidates_in_cell(s, i, grains, range, skin, |j, gap| {
+                            candidates_in_cell(s, &image, i, grains, range, skin, |j, gap| {
                                 keys.push(pair_key(gap, i - base, j));
                             });
                         }
@@ -290,6 +293,7 @@ fn x_runs(cells: &[usize]) -> [Option<(usize, usize)>; 3] {
 #[inline]
 fn candidates_in_cell(
     s: &GrainSnapshot,
+    image: &ImageLanes,
     i: usize,
     cell: &[u32],
     range: f64,
@@ -307,10 +311,9 @@ fn candidates_in_cell(
         if after == 0 {
             continue;
         }
-        let reach = r + F4::from_fn(|l| s.radius[j[l] as usize]) + range4;
-        let dist_sq = s
-            .separation_lanes(p, V4::from_fn(|l| s.position[j[l] as usize]))
-            .length_squared();
+        let b = s.gather4(j.map(|j| j as usize));
+        let reach = r + b.radius + range4;
+        let dist_sq = image.apply(p - b.position).length_squared();
         let limit = reach + skin4;
         let mut near = dist_sq.lt(limit * limit).bits() & after;
         if near == 0 {

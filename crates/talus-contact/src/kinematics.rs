@@ -2,6 +2,7 @@
 
 use glam::DVec3;
 use talus_core::lanes::{F4, V4};
+use talus_core::periodic::ImageLanes;
 use talus_core::snapshot::{GrainSnapshot, WallState};
 
 /// Everything a contact law needs to know about the pair at this instant.
@@ -202,15 +203,20 @@ pub struct SpinLanes {
 
 impl ContactKinematicsLanes {
     /// Kinematics of grains `i[k]` (a) and `j[k]` (b) of the snapshot in lane `k`
-    /// ([`ContactKinematics::grain_grain`]), in a box that is not sheared. The
+    /// ([`ContactKinematics::grain_grain`]), in a box that is not sheared, whose
+    /// nearest-image rule is `image` ([`GrainSnapshot::image_lanes`]). The
     /// displacement is left at zero until [`Self::set_displacement`].
     #[inline(always)]
-    pub fn grain_grain(s: &GrainSnapshot, i: [usize; 4], j: [usize; 4]) -> (Self, SpinLanes) {
-        let ra = F4::from_fn(|k| s.radius[i[k]]);
-        let rb = F4::from_fn(|k| s.radius[j[k]]);
-        let pa = V4::from_fn(|k| s.position[i[k]]);
-        let pb = V4::from_fn(|k| s.position[j[k]]);
-        let d = s.separation_lanes(pa, pb);
+    pub fn grain_grain(
+        s: &GrainSnapshot,
+        image: &ImageLanes,
+        i: [usize; 4],
+        j: [usize; 4],
+    ) -> (Self, SpinLanes) {
+        let (a, b) = (s.gather4(i), s.gather4(j));
+        let (ra, rb) = (a.radius, b.radius);
+        let pb = b.position;
+        let d = image.apply(a.position - pb);
         let dist = d.length();
         let zero = F4::zero();
         let normal = dist
@@ -221,16 +227,13 @@ impl ContactKinematicsLanes {
         let branch_a = -normal * (ra - half * overlap);
         let branch_b = normal * (rb - half * overlap);
         let point = pb + branch_b;
-        let wa = V4::from_fn(|k| s.omega[i[k]]);
-        let wb = V4::from_fn(|k| s.omega[j[k]]);
-        let va = V4::from_fn(|k| s.velocity[i[k]]);
-        let vb = V4::from_fn(|k| s.velocity[j[k]]);
+        let (wa, wb) = (a.omega, b.omega);
+        let (va, vb) = (a.velocity, b.velocity);
         // The scalar form adds the (here zero) velocity of b's image: kept, so that the
         // sign of a zero comes out the same.
         let relative_velocity = (va + wa.cross(branch_a)) - (vb + V4::zero() + wb.cross(branch_b));
         let normal_velocity = relative_velocity.dot(normal);
-        let inverse_ma = F4::from_fn(|k| s.inverse_mass[i[k]]);
-        let inverse_mb = F4::from_fn(|k| s.inverse_mass[j[k]]);
+        let (inverse_ma, inverse_mb) = (a.inverse_mass, b.inverse_mass);
         let kin = Self {
             normal,
             overlap,

@@ -211,8 +211,9 @@ pub fn evaluate_law<L: ContactLaw>(
     // The lane form serves grain pairs in a box without a sheared seam (whose image
     // velocity only the scalar kinematics handle).
     let use_lanes = L::LANES && lane_forms.is_none_or(|on| on.0) && !snapshot.is_sheared();
-    let lanes = use_lanes.then_some(LaneForm::<L> {
+    let lanes = use_lanes.then(|| LaneForm::<L> {
         snapshot,
+        image: snapshot.image_lanes(),
         params,
         dt,
     });
@@ -354,6 +355,8 @@ impl<H: Send + Sync + 'static, F> ScalarEvaluation<H> for F where
 /// What the lane form of law `L` reads besides its contacts.
 struct LaneForm<'a, L: ContactLaw> {
     snapshot: &'a GrainSnapshot,
+    /// The snapshot's nearest-image rule in lanes.
+    image: talus_core::periodic::ImageLanes,
     params: &'a [L::Params],
     dt: f64,
 }
@@ -389,7 +392,7 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
     let mut done = 0;
     let mut out = None;
     if valid != 0 {
-        let (mut kin, spin) = ContactKinematicsLanes::grain_grain(s, i, j);
+        let (mut kin, spin) = ContactKinematicsLanes::grain_grain(s, &form.image, i, j);
         let branch_shift = kin.set_displacement(
             V4::from_fn(|k| g[k].normal),
             F4::from_fn(|k| g[k].overlap),

@@ -207,18 +207,43 @@ impl NearestImage {
         d - DVec3::select(d.cmpgt(self.half), self.length, down)
     }
 
-    /// [`Self::apply`] in four lanes, bit for bit.
+    /// The rule in four lanes ([`ImageLanes`]).
     #[inline(always)]
-    pub fn apply_lanes(&self, d: crate::lanes::V4) -> crate::lanes::V4 {
+    pub fn lanes(&self) -> ImageLanes {
+        let splat = |v: DVec3| crate::lanes::V4::splat(v);
+        ImageLanes {
+            length: splat(self.length),
+            half: splat(self.half),
+            minus_length: splat(-self.length),
+            minus_half: splat(-self.half),
+        }
+    }
+}
+
+/// [`NearestImage`] with its box lengths spread over four lanes, made once before a loop
+/// that applies it to four separations at a time.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageLanes {
+    length: crate::lanes::V4,
+    half: crate::lanes::V4,
+    minus_length: crate::lanes::V4,
+    minus_half: crate::lanes::V4,
+}
+
+impl ImageLanes {
+    /// [`NearestImage::apply`] in four lanes, bit for bit.
+    #[inline(always)]
+    pub fn apply(&self, d: crate::lanes::V4) -> crate::lanes::V4 {
         use crate::lanes::F4;
-        let axis = |x: F4, length: f64, half: f64| {
-            let down = x.lt(F4::splat(-half)).select(F4::splat(-length), F4::zero());
-            x - x.gt(F4::splat(half)).select(F4::splat(length), down)
+        let axis = |x: F4, length: F4, half: F4, minus_length: F4, minus_half: F4| {
+            let down = x.lt(minus_half).select(minus_length, F4::zero());
+            x - x.gt(half).select(length, down)
         };
+        let (l, h, ml, mh) = (self.length, self.half, self.minus_length, self.minus_half);
         crate::lanes::V4 {
-            x: axis(d.x, self.length.x, self.half.x),
-            y: axis(d.y, self.length.y, self.half.y),
-            z: axis(d.z, self.length.z, self.half.z),
+            x: axis(d.x, l.x, h.x, ml.x, mh.x),
+            y: axis(d.y, l.y, h.y, ml.y, mh.y),
+            z: axis(d.z, l.z, h.z, ml.z, mh.z),
         }
     }
 }

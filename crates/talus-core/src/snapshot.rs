@@ -10,6 +10,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::components::*;
+use crate::lanes::{F4, V4};
 
 /// Marker for "no dense index".
 pub const NO_INDEX: u32 = u32::MAX;
@@ -27,6 +28,21 @@ pub struct WallState {
     pub velocity: DVec3,
     /// Material id.
     pub material: u16,
+}
+
+/// The snapshot's state of four grains, one per lane ([`GrainSnapshot::gather4`]).
+#[derive(Clone, Copy, Debug)]
+pub struct GrainLanes {
+    /// Centre positions.
+    pub position: V4,
+    /// Velocities.
+    pub velocity: V4,
+    /// Angular velocities.
+    pub omega: V4,
+    /// Radii.
+    pub radius: F4,
+    /// Inverse masses.
+    pub inverse_mass: F4,
 }
 
 /// Dense arrays of grain and wall state for the current step.
@@ -114,12 +130,14 @@ impl GrainSnapshot {
         self.periodic.is_some_and(|b| b.shear.is_some())
     }
 
-    /// [`Self::separation`] of four pairs at once, bit for bit, in a box that is not
-    /// sheared ([`Self::is_sheared`]); the image velocity is then zero.
+    /// The nearest-image rule of [`Self::separation`] in four lanes, for a box that is
+    /// not sheared ([`Self::is_sheared`]): `image.apply(a − b)` is the separation of four
+    /// pairs at once, bit for bit (the image velocity is then zero). Make it once before
+    /// a loop.
     #[inline(always)]
-    pub fn separation_lanes(&self, a: crate::lanes::V4, b: crate::lanes::V4) -> crate::lanes::V4 {
+    pub fn image_lanes(&self) -> crate::periodic::ImageLanes {
         debug_assert!(!self.is_sheared());
-        self.image.apply_lanes(a - b)
+        self.image.lanes()
     }
 
     /// Separation p_a − p_b (nearest image) and the velocity of that image of b beyond
@@ -157,6 +175,31 @@ impl GrainSnapshot {
         }
         #[cfg(not(target_arch = "x86_64"))]
         let _ = i;
+    }
+
+    /// The state of four grains (dense indices `i`), one per lane, for the lane forms of
+    /// the hot loops. Panics if an index is out of range (checked once for the four, not
+    /// at every one of the sixteen reads).
+    #[inline(always)]
+    pub fn gather4(&self, i: [usize; 4]) -> GrainLanes {
+        let n = self.position.len();
+        assert!(
+            i.iter().all(|&k| k < n)
+                && [self.velocity.len(), self.omega.len(), self.radius.len(), self.inverse_mass.len()]
+                    .iter()
+                    .all(|&len| len == n),
+            "grain index out of the snapshot"
+        );
+        // SAFETY: every index is below `n`, the length of each array read (checked above).
+        let at = |values: &[DVec3]| V4::from_fn(|k| unsafe { *values.get_unchecked(i[k]) });
+        let scalar = |values: &[f64]| F4::from_fn(|k| unsafe { *values.get_unchecked(i[k]) });
+        GrainLanes {
+            position: at(&self.position),
+            velocity: at(&self.velocity),
+            omega: at(&self.omega),
+            radius: scalar(&self.radius),
+            inverse_mass: scalar(&self.inverse_mass),
+        }
     }
 
     /// Index of a wall entity in [`GrainSnapshot::walls`].

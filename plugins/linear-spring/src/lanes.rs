@@ -10,7 +10,7 @@
 use talus_contact::{ContactKinematicsLanes, LaneResponse};
 use talus_core::lanes::{F4, V4};
 
-use crate::{LinearParams, TangentialSpring};
+use crate::{LinearParams, NormalDamping, TangentialSpring};
 
 /// [`crate::rotate_into_plane`] in lanes.
 #[inline(always)]
@@ -55,10 +55,57 @@ fn advance_tangential_spring(spring: V4, kin: &ContactKinematicsLanes) -> V4 {
     }
 }
 
-/// Lanes of `values` picked by `f`.
-#[inline(always)]
-fn lanes_of<T>(values: &[&T; 4], f: impl Fn(&T) -> f64) -> F4 {
-    F4::from_fn(|k| f(values[k]))
+/// The parameters of four contacts, in lanes.
+struct Params {
+    /// Normal stiffness.
+    k: F4,
+    /// Normal dashpot coefficient of each contact.
+    c: F4,
+    /// Tangential stiffness.
+    kt: F4,
+    /// Tangential dashpot coefficient.
+    ct: F4,
+    /// Friction coefficient.
+    friction: F4,
+}
+
+impl Params {
+    /// The parameters of four contacts of reduced masses `mass`, each formed as the scalar
+    /// form forms it. Four contacts of one material pair (the common case) share one set,
+    /// read once.
+    #[inline(always)]
+    fn of(p: [&LinearParams; 4], mass: F4) -> Self {
+        let c_ratio = |p: &LinearParams| p.tangential_damping_ratio;
+        if p[1..].iter().all(|q| std::ptr::eq(*q, p[0])) {
+            let q = p[0];
+            let k = F4::splat(q.normal_stiffness);
+            let c = match q.normal_damping {
+                NormalDamping::Coefficient(c) => F4::splat(c),
+                NormalDamping::Ratio(zeta) => F4::splat(2.0 * zeta) * (mass * k).sqrt(),
+                NormalDamping::Rate(gamma) => F4::splat(gamma) * mass,
+            };
+            return Self {
+                k,
+                c,
+                kt: F4::splat(q.tangential_stiffness),
+                ct: F4::splat(c_ratio(q)) * c,
+                friction: F4::splat(q.friction),
+            };
+        }
+        let lanes = |f: fn(&LinearParams) -> f64| F4::from_fn(|l| f(p[l]));
+        let mass = mass.to_array();
+        let c = F4::from_fn(|l| {
+            p[l].normal_damping
+                .coefficient(p[l].normal_stiffness, mass[l])
+        });
+        Self {
+            k: lanes(|p| p.normal_stiffness),
+            c,
+            kt: lanes(|p| p.tangential_stiffness),
+            ct: lanes(c_ratio) * c,
+            friction: lanes(|p| p.friction),
+        }
+    }
 }
 
 /// [`crate::onset_weight`] in lanes: 1 where the contact overlapped before this step or
@@ -180,12 +227,13 @@ pub(crate) fn evaluate(
     // overlap goes the contact's way there too).
     let released = delta.le(zero);
     let n = kin.normal;
-    let k = lanes_of(&p, |p| p.normal_stiffness);
-    let mass = kin.effective_mass.to_array();
-    let c = F4::from_fn(|l| {
-        p[l].normal_damping
-            .coefficient(p[l].normal_stiffness, mass[l])
-    });
+    let Params {
+        k,
+        c,
+        kt,
+        ct,
+        friction,
+    } = Params::of(p, kin.effective_mass);
     let vn = kin.normal_velocity;
     let old = Old {
         spring: V4::from_fn(|l| history[l].spring),
@@ -197,10 +245,7 @@ pub(crate) fn evaluate(
     let spring_force = k * delta * onset_weight(kin, k, normal_damping, dt, delta);
     let fn_mag = spring_force - c * vn;
 
-    let friction = lanes_of(&p, |p| p.friction);
     let sliding = friction.gt(zero);
-    let kt = lanes_of(&p, |p| p.tangential_stiffness);
-    let ct = lanes_of(&p, |p| p.tangential_damping_ratio) * c;
     let vt = kin.tangential_velocity;
     let trial = advance_tangential_spring(old.spring, kin);
     let ft_trial = trial * -kt - vt * ct;
