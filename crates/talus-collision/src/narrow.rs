@@ -520,10 +520,11 @@ fn narrow_chunk(
     // Four pairs at a time where the separation is the plain nearest image (the same bits
     // as one at a time); across a sheared seam, one at a time.
     let image = (!s.is_sheared()).then(|| s.image_lanes());
+    let grains = s.reader();
     let range4 = F4::splat(range);
     let mut test = |i: [usize; 4], j: [u32; 4], live: u32| {
         let mut within = if let Some(image) = &image {
-            let (a, b) = (s.gather4(i), s.gather4(j.map(|j| j as usize)));
+            let (a, b) = (grains.gather4(i), grains.gather4(j.map(|j| j as usize)));
             let reach = a.radius + b.radius + range4;
             image
                 .apply(a.position - b.position)

@@ -13,7 +13,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use talus_core::lanes::{F4, V4};
 use talus_core::periodic::{ImageLanes, LeesEdwards, NearestImage, PeriodicBox};
-use talus_core::snapshot::GrainSnapshot;
+use talus_core::snapshot::{GrainReader, GrainSnapshot};
 
 use crate::grid::CellGrid;
 
@@ -159,10 +159,14 @@ impl NeighbourList {
         // The largest move is a maximum, so the same on any number of threads.
         let largest_sq = s
             .position
-            .par_iter()
-            .with_min_len(4096)
-            .zip(self.reference.par_iter())
-            .map(|(p, q)| s.separation(*p, *q).length_squared())
+            .par_chunks(4096)
+            .zip(self.reference.par_chunks(4096))
+            .map(|(p, q)| {
+                p.iter()
+                    .zip(q)
+                    .map(|(p, q)| s.separation(*p, *q).length_squared())
+                    .fold(0.0, f64::max)
+            })
             .reduce(|| 0.0, f64::max);
         if largest_sq > half * half {
             return true;
@@ -227,6 +231,7 @@ pub fn update_neighbour_list(
             // (Only used where the box is not sheared.)
             let image = NearestImage::default().lanes();
             let image = if s.is_sheared() { image } else { s.image_lanes() };
+            let reader = s.reader();
             for i in base..(base + CHUNK).min(n) {
                 let p = s.position[i];
                 let c = grid.coords(p);
@@ -248,7 +253,7 @@ pub fn update_neighbour_list(
                         let row = grid.index([0, cy, cz]);
                         for &(first, last) in runs.iter().flatten() {
                             let grains = grid.cells_grains(row + first, row + last);
-                            candidates_in_cell(s, &image, i, grains, range, skin, |j, gap| {
+                            candidates_in_cell(s, &reader, &image, i, grains, range, skin, |j, gap| {
                                 keys.push(pair_key(gap, i - base, j));
                             });
                         }
@@ -293,6 +298,7 @@ fn x_runs(cells: &[usize]) -> [Option<(usize, usize)>; 3] {
 #[inline]
 fn candidates_in_cell(
     s: &GrainSnapshot,
+    grains: &GrainReader,
     image: &ImageLanes,
     i: usize,
     cell: &[u32],
@@ -311,7 +317,7 @@ fn candidates_in_cell(
         if after == 0 {
             continue;
         }
-        let b = s.gather4(j.map(|j| j as usize));
+        let b = grains.gather4(j.map(|j| j as usize));
         let reach = r + b.radius + range4;
         let dist_sq = image.apply(p - b.position).length_squared();
         let limit = reach + skin4;

@@ -3,7 +3,7 @@
 use glam::DVec3;
 use talus_core::lanes::{F4, V4};
 use talus_core::periodic::ImageLanes;
-use talus_core::snapshot::{GrainSnapshot, WallState};
+use talus_core::snapshot::{GrainReader, GrainSnapshot, WallState};
 
 /// Everything a contact law needs to know about the pair at this instant.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -202,13 +202,14 @@ pub struct SpinLanes {
 }
 
 impl ContactKinematicsLanes {
-    /// Kinematics of grains `i[k]` (a) and `j[k]` (b) of the snapshot in lane `k`
+    /// Kinematics of grains `i[k]` (a) and `j[k]` (b) of the snapshot (read through `s`,
+    /// [`GrainSnapshot::reader`]) in lane `k`
     /// ([`ContactKinematics::grain_grain`]), in a box that is not sheared, whose
     /// nearest-image rule is `image` ([`GrainSnapshot::image_lanes`]). The
     /// displacement is left at zero until [`Self::set_displacement`].
     #[inline(always)]
     pub fn grain_grain(
-        s: &GrainSnapshot,
+        s: &GrainReader,
         image: &ImageLanes,
         i: [usize; 4],
         j: [usize; 4],

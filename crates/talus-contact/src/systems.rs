@@ -213,6 +213,7 @@ pub fn evaluate_law<L: ContactLaw>(
     let use_lanes = L::LANES && lane_forms.is_none_or(|on| on.0) && !snapshot.is_sheared();
     let lanes = use_lanes.then(|| LaneForm::<L> {
         snapshot,
+        grains: snapshot.reader(),
         image: snapshot.image_lanes(),
         params,
         dt,
@@ -355,6 +356,8 @@ impl<H: Send + Sync + 'static, F> ScalarEvaluation<H> for F where
 /// What the lane form of law `L` reads besides its contacts.
 struct LaneForm<'a, L: ContactLaw> {
     snapshot: &'a GrainSnapshot,
+    /// The snapshot's grain arrays, for four-grain gathers.
+    grains: talus_core::snapshot::GrainReader<'a>,
     /// The snapshot's nearest-image rule in lanes.
     image: talus_core::periodic::ImageLanes,
     params: &'a [L::Params],
@@ -392,7 +395,7 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
     let mut done = 0;
     let mut out = None;
     if valid != 0 {
-        let (mut kin, spin) = ContactKinematicsLanes::grain_grain(s, &form.image, i, j);
+        let (mut kin, spin) = ContactKinematicsLanes::grain_grain(&form.grains, &form.image, i, j);
         let branch_shift = kin.set_displacement(
             V4::from_fn(|k| g[k].normal),
             F4::from_fn(|k| g[k].overlap),

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use crate::components::*;
 use crate::energy::{EnergyLedger, EnergySnapshot};
+use crate::lanes::{F4, V4};
 use crate::resources::{BlowUp, Clock, Health, SimConfig};
 
 /// Grains below this count are integrated on one thread: spawning tasks costs more.
@@ -117,9 +118,10 @@ fn rotation_kick(
             w.0 += t.0 * (kick / i.0);
         };
         if w.len() >= PARALLEL_THRESHOLD {
-            w.par_iter_mut()
-                .zip(t.par_iter().zip(i.par_iter()))
-                .for_each(update);
+            // Chunks, each a plain loop: rayon's per-item plumbing costs more than a kick.
+            w.par_chunks_mut(PARALLEL_THRESHOLD)
+                .zip(t.par_chunks(PARALLEL_THRESHOLD).zip(i.par_chunks(PARALLEL_THRESHOLD)))
+                .for_each(|(w, (t, i))| w.iter_mut().zip(t.iter().zip(i)).for_each(update));
         } else {
             w.iter_mut().zip(t.iter().zip(i.iter())).for_each(update);
         }
@@ -140,9 +142,9 @@ pub fn second_kick_translation(
         let v = v.bypass_change_detection();
         let update = |(v, (f, m)): (&mut Velocity, (&Force, &Mass))| v.0 += f.0 * (kick / m.0);
         if v.len() >= PARALLEL_THRESHOLD {
-            v.par_iter_mut()
-                .zip(f.par_iter().zip(m.par_iter()))
-                .for_each(update);
+            v.par_chunks_mut(PARALLEL_THRESHOLD)
+                .zip(f.par_chunks(PARALLEL_THRESHOLD).zip(m.par_chunks(PARALLEL_THRESHOLD)))
+                .for_each(|(v, (f, m))| v.iter_mut().zip(f.iter().zip(m)).for_each(update));
         } else {
             v.iter_mut().zip(f.iter().zip(m.iter())).for_each(update);
         }
@@ -156,7 +158,9 @@ pub fn gravity(config: Res<SimConfig>, mut grains: Query<(&mut Force, &Mass), Wi
         let f = f.bypass_change_detection();
         let update = |(f, m): (&mut Force, &Mass)| f.0 += g * m.0;
         if f.len() >= PARALLEL_THRESHOLD {
-            f.par_iter_mut().zip(m.par_iter()).for_each(update);
+            f.par_chunks_mut(PARALLEL_THRESHOLD)
+                .zip(m.par_chunks(PARALLEL_THRESHOLD))
+                .for_each(|(f, m)| f.iter_mut().zip(m).for_each(update));
         } else {
             f.iter_mut().zip(m.iter()).for_each(update);
         }
@@ -263,23 +267,44 @@ pub fn kinetic_energy(
     // of threads.
     let mut partial: Vec<[f64; 3]> = Vec::new();
     for (v, w, m, i, f, t) in grains.contiguous_iter().expect("grain query is dense") {
+        // Four grains at a time, each lane summing every fourth grain of the chunk; the
+        // lanes are added in a fixed order at the end of the chunk.
         let sums = |((v, w), (m, i)): (
             (&[Velocity], &[AngularVelocity]),
             (&[Mass], &[MomentOfInertia]),
         ),
                     (f, t): (&[Force], &[Torque])| {
-            let mut sums = [0.0; 3];
-            for k in 0..v.len() {
-                sums[0] += 0.5 * m[k].0 * v[k].0.length_squared();
-                sums[1] += 0.5 * i[k].0 * w[k].0.length_squared();
-                sums[2] +=
-                    linear * v[k].0.dot(f[k].0) - quadratic * f[k].0.length_squared() / m[k].0;
+            let (half, linear, quadratic) =
+                (F4::splat(0.5), F4::splat(linear), F4::splat(quadratic));
+            let mut sums = [F4::zero(); 3];
+            let mut add = |g: [Grain4; 1]| {
+                let [g] = g;
+                sums[0] = sums[0] + half * g.m * g.v.length_squared();
+                sums[1] = sums[1] + half * g.i * g.w.length_squared();
+                sums[2] = sums[2] + (linear * g.v.dot(g.f) - quadratic * g.f.length_squared() / g.m);
                 if rotation {
-                    sums[2] +=
-                        linear * w[k].0.dot(t[k].0) - quadratic * t[k].0.length_squared() / i[k].0;
+                    sums[2] =
+                        sums[2] + (linear * g.w.dot(g.t) - quadratic * g.t.length_squared() / g.i);
                 }
+            };
+            let n = v.len();
+            let (w, m, i, f, t) = (&w[..n], &m[..n], &i[..n], &f[..n], &t[..n]);
+            let full = n / 4 * 4;
+            for (((v, w), (m, i)), (f, t)) in v[..full]
+                .chunks_exact(4)
+                .zip(w[..full].chunks_exact(4))
+                .zip(m[..full].chunks_exact(4).zip(i[..full].chunks_exact(4)))
+                .zip(f[..full].chunks_exact(4).zip(t[..full].chunks_exact(4)))
+            {
+                add([Grain4::load(0, 4, v, w, m, i, f, t)]);
             }
-            sums
+            if full < n {
+                add([Grain4::load(full, n - full, v, w, m, i, f, t)]);
+            }
+            sums.map(|lanes| {
+                let [a, b, c, d] = lanes.to_array();
+                (a + b) + (c + d)
+            })
         };
         partial.par_extend(
             v.par_chunks(REDUCTION_CHUNK)
@@ -304,6 +329,54 @@ pub fn kinetic_energy(
     energy.translational_kinetic = translational;
     energy.rotational_kinetic = rotational;
     energy.kinetic_staggering = staggering;
+}
+
+/// Four grains' state for the kinetic-energy sums, one per lane.
+struct Grain4 {
+    v: V4,
+    w: V4,
+    f: V4,
+    t: V4,
+    m: F4,
+    i: F4,
+}
+
+impl Grain4 {
+    /// Grains `k..k + live` of the columns; the lanes past `live` hold a grain at rest,
+    /// unloaded, of unit mass and inertia, which adds zero to every sum.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn load(
+        k: usize,
+        live: usize,
+        v: &[Velocity],
+        w: &[AngularVelocity],
+        m: &[Mass],
+        i: &[MomentOfInertia],
+        f: &[Force],
+        t: &[Torque],
+    ) -> Self {
+        Self {
+            v: lanes3(k, live, v, |x| x.0),
+            w: lanes3(k, live, w, |x| x.0),
+            f: lanes3(k, live, f, |x| x.0),
+            t: lanes3(k, live, t, |x| x.0),
+            m: lanes1(k, live, m, |x| x.0),
+            i: lanes1(k, live, i, |x| x.0),
+        }
+    }
+}
+
+/// Vectors `k..k + live` of a column in lanes, zero past `live`.
+#[inline(always)]
+fn lanes3<T>(k: usize, live: usize, column: &[T], value: impl Fn(&T) -> DVec3) -> V4 {
+    V4::from_fn(|l| if l < live { value(&column[k + l]) } else { DVec3::ZERO })
+}
+
+/// Numbers `k..k + live` of a column in lanes, one past `live`.
+#[inline(always)]
+fn lanes1<T>(k: usize, live: usize, column: &[T], value: impl Fn(&T) -> f64) -> F4 {
+    F4::from_fn(|l| if l < live { value(&column[k + l]) } else { 1.0 })
 }
 
 /// Stops the run on a non-finite position, velocity or force, or on an overlap beyond

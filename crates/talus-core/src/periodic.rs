@@ -251,11 +251,23 @@ impl ImageLanes {
 /// Wraps grain positions back into the periodic box after the drift.
 pub fn wrap_positions(periodic: Res<PeriodicBox>, mut grains: Query<&mut Position, With<Grain>>) {
     let b = *periodic;
+    // Almost every grain is inside the box after a step: one test of all axes at once (an
+    // axis that does not wrap has infinite bounds), and the full rule for the others.
+    let lo = DVec3::from_array(std::array::from_fn(|a| if b.axes[a] { b.lo[a] } else { f64::NEG_INFINITY }));
+    let hi = DVec3::from_array(std::array::from_fn(|a| if b.axes[a] { b.hi[a] } else { f64::INFINITY }));
+    let inside = |p: DVec3| {
+        (p.x >= lo.x) & (p.x < hi.x) & (p.y >= lo.y) & (p.y < hi.y) & (p.z >= lo.z) & (p.z < hi.z)
+    };
     for mut p in grains.contiguous_iter_mut().expect("grain query is dense") {
         p.bypass_change_detection()
-            .par_iter_mut()
-            .with_min_len(4096)
-            .for_each(|p| p.0 = b.wrap(p.0));
+            .par_chunks_mut(4096)
+            .for_each(|chunk| {
+                for p in chunk {
+                    if !inside(p.0) {
+                        p.0 = b.wrap(p.0);
+                    }
+                }
+            });
     }
 }
 
