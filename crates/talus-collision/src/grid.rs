@@ -53,10 +53,14 @@ impl CellGrid {
         &self.sorted[self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize]
     }
 
-    /// Grains of the cells `first..=last` (dense cell indices), one run of `sorted`.
+    /// Where the grains of the cells `first..=last` (dense cell indices) lie in
+    /// `sorted`: one run, `start..end`.
     #[inline]
-    pub fn cells_grains(&self, first: usize, last: usize) -> &[u32] {
-        &self.sorted[self.cell_start[first] as usize..self.cell_start[last + 1] as usize]
+    pub fn cells_span(&self, first: usize, last: usize) -> (usize, usize) {
+        (
+            self.cell_start[first] as usize,
+            self.cell_start[last + 1] as usize,
+        )
     }
 
     /// Rebuilds the grid over the grains of a snapshot.

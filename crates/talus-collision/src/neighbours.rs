@@ -227,6 +227,7 @@ pub fn update_neighbour_list(
         .for_each(|(chunk, out)| {
             let (mut keys, mut scratch): (Vec<u64>, Vec<u64>) = (Vec::new(), Vec::new());
             let mut pairs: Vec<(u32, u16)> = Vec::new();
+            let mut after: Vec<u32> = Vec::new();
             let base = chunk * CHUNK;
             // (Only used where the box is not sheared.)
             let image = NearestImage::default().lanes();
@@ -245,20 +246,35 @@ pub fn update_neighbour_list(
                 }
                 let [xs, ys, zs] = [0, 1, 2].map(|a| grid.neighbour_cells(c, a));
                 // Cells next to each other along x are next to each other in the grid's
-                // sorted grains: each row of the stencil is one or two runs of grains,
-                // tested four at a time, instead of three short cells.
-                let runs = x_runs(xs.cells());
+                // sorted grains: each row of the stencil is one or two runs of grains.
+                // The grains after i in those runs (without a branch per grain, which
+                // half of them would mispredict) are then tested four at a time.
+                let (runs, run_count) = x_runs(xs.cells());
+                let mut spans = [(0usize, 0usize); 18];
+                let mut span_count = 0;
+                let mut total = 0;
                 for &cz in zs.cells() {
                     for &cy in ys.cells() {
                         let row = grid.index([0, cy, cz]);
-                        for &(first, last) in runs.iter().flatten() {
-                            let grains = grid.cells_grains(row + first, row + last);
-                            candidates_in_cell(s, &reader, &image, i, grains, range, skin, |j, gap| {
-                                keys.push(pair_key(gap, i - base, j));
-                            });
+                        for &(first, last) in &runs[..run_count] {
+                            let span = grid.cells_span(row + first, row + last);
+                            total += span.1 - span.0;
+                            spans[span_count] = span;
+                            span_count += 1;
                         }
                     }
                 }
+                after.resize(total.max(after.len()), 0);
+                let mut count = 0;
+                for &(start, end) in &spans[..span_count] {
+                    for &j in &grid.sorted[start..end] {
+                        after[count] = j;
+                        count += usize::from(j as usize > i);
+                    }
+                }
+                candidates_after(s, &reader, &image, i, &after[..count], range, skin, |j, gap| {
+                    keys.push(pair_key(gap, i - base, j));
+                });
             }
             out.fill(&mut keys, &mut scratch);
         });
@@ -274,56 +290,48 @@ pub fn update_neighbour_list(
 }
 
 /// The runs of consecutive cells among a stencil's cells along one axis (sorted, or
-/// wrapped around a periodic axis: `[n − 1, 0, 1]`), as (first, last) pairs.
+/// wrapped around a periodic axis: `[n − 1, 0, 1]`), as (first, last) pairs, and how
+/// many there are (one or two).
 #[inline]
-fn x_runs(cells: &[usize]) -> [Option<(usize, usize)>; 3] {
-    let mut runs = [None; 3];
+fn x_runs(cells: &[usize]) -> ([(usize, usize); 3], usize) {
+    let mut runs = [(cells[0], cells[0]); 3];
     let mut k = 0;
-    for &c in cells {
-        match &mut runs[k] {
-            Some((_, last)) if *last + 1 == c => *last = c,
-            Some(_) => {
-                k += 1;
-                runs[k] = Some((c, c));
-            }
-            None => runs[k] = Some((c, c)),
+    for &c in &cells[1..] {
+        if runs[k].1 + 1 == c {
+            runs[k].1 = c;
+        } else {
+            k += 1;
+            runs[k] = (c, c);
         }
     }
-    runs
+    (runs, k + 1)
 }
 
-/// The grains j > i of one cell (`cell`, dense indices) within reach + skin of grain `i`,
-/// each handed to `found` with its gap quanta; four at a time, in a box without a
+/// The grains among `after` (dense indices, each above `i`) within reach + skin of grain
+/// `i`, each handed to `found` with its gap quanta; four at a time, in a box without a
 /// sheared seam. The same test, bit for bit, as one pair at a time.
 #[inline]
-fn candidates_in_cell(
+#[allow(clippy::too_many_arguments)]
+fn candidates_after(
     s: &GrainSnapshot,
     grains: &GrainReader,
     image: &ImageLanes,
     i: usize,
-    cell: &[u32],
+    after: &[u32],
     range: f64,
     skin: f64,
     mut found: impl FnMut(u32, u16),
 ) {
     let (p, r) = (V4::splat(s.position[i]), F4::splat(s.radius[i]));
     let (range4, skin4) = (F4::splat(range), F4::splat(skin));
-    for batch in cell.chunks(4) {
-        // A short batch repeats its first grain in the lanes left over.
-        let j: [u32; 4] = std::array::from_fn(|l| *batch.get(l).unwrap_or(&batch[0]));
-        let after: u32 = (0..4)
-            .map(|l| u32::from(j[l] as usize > i && l < batch.len()) << l)
-            .sum();
-        if after == 0 {
-            continue;
-        }
+    let mut test = |j: [u32; 4], live: u32| {
         let b = grains.gather4(j.map(|j| j as usize));
         let reach = r + b.radius + range4;
         let dist_sq = image.apply(p - b.position).length_squared();
         let limit = reach + skin4;
-        let mut near = dist_sq.lt(limit * limit).bits() & after;
+        let mut near = dist_sq.lt(limit * limit).bits() & live;
         if near == 0 {
-            continue;
+            return;
         }
         let (dist_sq, reach) = (dist_sq.to_array(), reach.to_array());
         while near != 0 {
@@ -331,6 +339,18 @@ fn candidates_in_cell(
             found(j[l], gap_quanta(dist_sq[l], reach[l], skin));
             near &= near - 1;
         }
+    };
+    let batches = after.chunks_exact(4);
+    let rest = batches.remainder();
+    for batch in batches {
+        test(batch.try_into().expect("four grains"), 0xF);
+    }
+    if !rest.is_empty() {
+        // The last grains, with the first of them repeated in the lanes left over.
+        test(
+            std::array::from_fn(|l| rest[l.min(rest.len() - 1)]),
+            (1 << rest.len()) - 1,
+        );
     }
 }
 
