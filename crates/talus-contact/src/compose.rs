@@ -17,10 +17,12 @@ use talus_core::energy::MAX_DISSIPATION_CHANNELS;
 use talus_core::resources::Dimension;
 use talus_core::schedule::SimBuilder;
 
-use crate::kinematics::ContactKinematics;
+use crate::kinematics::{ContactKinematics, ContactKinematicsLanes};
 use crate::law::{
-    ContactLaw, ContactResponse, LawDescriptor, PairAssignment, TimeScale, install_law,
+    ContactLaw, ContactResponse, LaneResponse, LawDescriptor, PairAssignment, TimeScale,
+    install_law,
 };
+use talus_core::lanes::{F4, V4};
 use crate::params::{ParamError, ParamSpec, ParamValues};
 
 /// The place of a sub-model in a composed law, which is also its evaluation order.
@@ -140,6 +142,76 @@ impl ContactState {
     }
 }
 
+/// [`ContactState`] of four contacts, one per lane: what the parts' lane forms
+/// ([`SubModel::evaluate_lanes`]) fill, field for field as the scalar parts fill theirs.
+#[derive(Clone, Copy, Debug)]
+pub struct ContactStateLanes {
+    /// Elastic normal force, N.
+    pub normal_elastic: F4,
+    /// Contact stiffness dF_n/dδ, N/m.
+    pub normal_stiffness: F4,
+    /// Damping normal force, N.
+    pub normal_damping: F4,
+    /// Normal dashpot coefficient, N s/m.
+    pub damping_coefficient: F4,
+    /// Cohesive normal force, N.
+    pub normal_cohesion: F4,
+    /// Tangential force on body `a`, N.
+    pub tangential_force: V4,
+    /// Extra torque on `a`, N m.
+    pub torque_a: V4,
+    /// Extra torque on `b`, N m.
+    pub torque_b: V4,
+    /// Elastic energy stored after the step, J.
+    pub elastic_energy: F4,
+    /// Energy dissipated during the step, per channel of the composed law, J.
+    pub dissipated: [F4; MAX_DISSIPATION_CHANNELS],
+    /// Energy created by the time integration during the step, J.
+    pub integration_error: F4,
+    /// First channel of the part being evaluated; set by the composed law.
+    pub channel_base: usize,
+}
+
+impl Default for ContactStateLanes {
+    fn default() -> Self {
+        Self {
+            normal_elastic: F4::zero(),
+            normal_stiffness: F4::zero(),
+            normal_damping: F4::zero(),
+            damping_coefficient: F4::zero(),
+            normal_cohesion: F4::zero(),
+            tangential_force: V4::zero(),
+            torque_a: V4::zero(),
+            torque_b: V4::zero(),
+            elastic_energy: F4::zero(),
+            dissipated: [F4::zero(); MAX_DISSIPATION_CHANNELS],
+            integration_error: F4::zero(),
+            channel_base: 0,
+        }
+    }
+}
+
+impl ContactStateLanes {
+    /// [`ContactState::normal_force`] in lanes.
+    #[inline(always)]
+    pub fn normal_force(&self) -> F4 {
+        self.normal_elastic + self.normal_damping
+    }
+
+    /// [`ContactState::total_normal_force`] in lanes.
+    #[inline(always)]
+    pub fn total_normal_force(&self) -> F4 {
+        self.normal_force() + self.normal_cohesion
+    }
+
+    /// [`ContactState::dissipate`] in lanes.
+    #[inline(always)]
+    pub fn dissipate(&mut self, k: usize, energy: F4) {
+        let channel = &mut self.dissipated[self.channel_base + k];
+        *channel = *channel + energy;
+    }
+}
+
 /// One part of a composed contact law.
 pub trait SubModel: Send + Sync + 'static {
     /// Which part it is.
@@ -209,6 +281,41 @@ pub trait SubModel: Send + Sync + 'static {
         _dt: f64,
     ) {
     }
+
+    /// Whether the part has a lane form ([`Self::evaluate_lanes`] and, for a normal part
+    /// that finishes after the damping part, [`Self::after_damping_lanes`]). A composed
+    /// law has a lane form when all its parts do.
+    const LANES: bool = false;
+
+    /// [`Self::evaluate`] for four contacts at once, one per lane: the same operations in
+    /// the same order, so that every lane gets the scalar form's bits (each branch a mask).
+    /// All four lanes are evaluated; the composed law keeps the histories only of the lanes
+    /// the core offered. With `book` false the energies are not read and may be skipped.
+    /// Only called when [`Self::LANES`] is true.
+    #[inline(always)]
+    fn evaluate_lanes(
+        params: [&Self::Params; 4],
+        kin: &ContactKinematicsLanes,
+        history: [&mut Self::History; 4],
+        state: &mut ContactStateLanes,
+        dt: f64,
+        book: bool,
+    ) {
+        let _ = (params, kin, history, state, dt, book);
+    }
+
+    /// [`Self::after_damping`] in lanes. Does nothing by default.
+    #[inline(always)]
+    fn after_damping_lanes(
+        params: [&Self::Params; 4],
+        kin: &ContactKinematicsLanes,
+        history: [&mut Self::History; 4],
+        state: &mut ContactStateLanes,
+        dt: f64,
+        book: bool,
+    ) {
+        let _ = (params, kin, history, state, dt, book);
+    }
 }
 
 /// The absent part: no parameters, no history, no effect.
@@ -245,6 +352,8 @@ impl<const K: u8> SubModel for Absent<K> {
 
     #[inline(always)]
     fn evaluate(_: &(), _: &ContactKinematics, _: &mut (), _: &mut ContactState, _: f64) {}
+
+    const LANES: bool = true;
 }
 
 /// A law made of a normal part `N`, a damping part `D`, a tangential part `T`, a rolling
@@ -450,6 +559,71 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
             dissipated: s.dissipated,
             integration_error: s.integration_error,
         }
+    }
+
+    const LANES: bool = N::LANES && D::LANES && T::LANES && R::LANES && W::LANES && C::LANES;
+
+    #[inline(always)]
+    fn evaluate_lanes(
+        p: [&Self::Params; 4],
+        kin: &ContactKinematicsLanes,
+        history: [&mut Self::History; 4],
+        lanes: u32,
+        dt: f64,
+        book: bool,
+    ) -> (u32, LaneResponse) {
+        if !Self::LANES || lanes == 0 {
+            return (0, LaneResponse::default());
+        }
+        // The parts evaluate all four lanes on copies; only the offered lanes keep theirs.
+        let mut local: [Self::History; 4] = std::array::from_fn(|l| history[l].clone());
+        let mut s = ContactStateLanes::default();
+        let b = Self::BASES;
+        {
+            let [h0, h1, h2, h3] = &mut local;
+            macro_rules! part {
+                ($field:ident) => {
+                    (
+                        [&p[0].$field, &p[1].$field, &p[2].$field, &p[3].$field],
+                        [&mut h0.$field, &mut h1.$field, &mut h2.$field, &mut h3.$field],
+                    )
+                };
+            }
+            s.channel_base = b[0];
+            let (pp, hh) = part!(normal);
+            N::evaluate_lanes(pp, kin, hh, &mut s, dt, book);
+            s.channel_base = b[1];
+            let (pp, hh) = part!(damping);
+            D::evaluate_lanes(pp, kin, hh, &mut s, dt, book);
+            let (pp, hh) = part!(normal);
+            N::after_damping_lanes(pp, kin, hh, &mut s, dt, book);
+            s.channel_base = b[2];
+            let (pp, hh) = part!(cohesion);
+            C::evaluate_lanes(pp, kin, hh, &mut s, dt, book);
+            s.channel_base = b[3];
+            let (pp, hh) = part!(tangential);
+            T::evaluate_lanes(pp, kin, hh, &mut s, dt, book);
+            s.channel_base = b[4];
+            let (pp, hh) = part!(rolling);
+            R::evaluate_lanes(pp, kin, hh, &mut s, dt, book);
+            s.channel_base = b[5];
+            let (pp, hh) = part!(twisting);
+            W::evaluate_lanes(pp, kin, hh, &mut s, dt, book);
+        }
+        for (l, (h, new)) in history.into_iter().zip(local).enumerate() {
+            if lanes >> l & 1 == 1 {
+                *h = new;
+            }
+        }
+        let response = LaneResponse {
+            force: kin.normal * s.total_normal_force() + s.tangential_force,
+            torque_a: s.torque_a,
+            torque_b: s.torque_b,
+            elastic_energy: s.elastic_energy,
+            dissipated: s.dissipated,
+            integration_error: s.integration_error,
+        };
+        (lanes, response)
     }
 }
 

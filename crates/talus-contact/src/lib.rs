@@ -23,7 +23,8 @@ pub mod systems;
 
 pub use components::*;
 pub use compose::{
-    Absent, Composed, ComposedHistory, ComposedLaw, ComposedParams, ContactState, Needs,
+    Absent, Composed, ComposedHistory, ComposedLaw, ComposedParams, ContactState,
+    ContactStateLanes, Needs,
     NoCohesion, NoDamping, NoRolling, NoTwisting, SubModel, SubModelKind, is_two_dimensional,
 };
 pub use kinematics::{ContactKinematics, ContactKinematicsLanes, SpinLanes};

@@ -293,6 +293,20 @@ impl F4 {
         M4(imp::eq(self.0, other.0))
     }
 
+    /// `f64::max` lane by lane: the larger; the other where one is NaN; `self` on a tie.
+    #[inline(always)]
+    pub fn max(self, other: Self) -> Self {
+        other.gt(self).or(self.eq(self).not()).select(other, self)
+    }
+
+    /// `f64::clamp(lo, hi)` lane by lane (NaN stays NaN).
+    #[inline(always)]
+    pub fn clamp(self, lo: f64, hi: f64) -> Self {
+        let (lo, hi) = (Self::splat(lo), Self::splat(hi));
+        let x = self.lt(lo).select(lo, self);
+        x.gt(hi).select(hi, x)
+    }
+
     /// Lanes that are neither infinite nor NaN.
     #[inline(always)]
     pub fn is_finite(self) -> M4 {
@@ -588,6 +602,8 @@ mod tests {
             assert_eq!(bits(fa.ge(fb)), expect(&|x, y| x >= y));
             assert_eq!(bits(fa.eq(fb)), expect(&|x, y| x == y));
             assert_eq!(bits(fa.is_finite()), expect(&|x, _| x.is_finite()));
+            same(fa.max(fb), std::array::from_fn(|k| a[k].max(b[k])));
+            same(fa.clamp(-1.0, 1.0), a.map(|x| x.clamp(-1.0, 1.0)));
             let m = fa.lt(fb);
             same(
                 m.select(fa, fb),

@@ -4,6 +4,7 @@
 
 use glam::DVec3;
 use talus_contact::*;
+use talus_core::lanes::{F4, V4};
 
 use crate::analytic::{damping_from_restitution, hertz_max_overlap, hertz_stiffness};
 use crate::params::{DAMPING_PARAMS, HertzModuli, characteristic_velocity, required};
@@ -106,5 +107,43 @@ impl SubModel for HertzDamping {
         let force = kin.normal * magnitude;
         s.dissipate(0, -0.5 * (h.force + force).dot(displacement));
         h.force = force;
+    }
+
+    const LANES: bool = true;
+
+    #[inline(always)]
+    fn evaluate_lanes(
+        p: [&HertzDampingParams; 4],
+        kin: &ContactKinematicsLanes,
+        h: [&mut HertzDampingHistory; 4],
+        s: &mut ContactStateLanes,
+        _dt: f64,
+        book: bool,
+    ) {
+        let released = kin.overlap.le(F4::zero());
+        let factor = F4::from_fn(|l| p[l].coefficient_factor);
+        let c = factor * (kin.effective_mass * s.normal_stiffness).sqrt();
+        let magnitude = (-c * kin.normal_velocity).max(-s.normal_elastic);
+        s.normal_damping = released.select(s.normal_damping, magnitude);
+        s.damping_coefficient = released.select(s.damping_coefficient, c);
+        let force = kin.normal * magnitude;
+        if book {
+            let displacement = kin.displacement;
+            let old = V4::from_fn(|l| h[l].force);
+            let minus_half = F4::splat(-0.5);
+            let work = released.select(
+                minus_half * old.dot(displacement),
+                minus_half * (old + force).dot(displacement),
+            );
+            s.dissipate(0, work);
+        }
+        let (force, released) = (force.to_array(), released.bits());
+        for (l, h) in h.into_iter().enumerate() {
+            *h = if released >> l & 1 == 1 {
+                HertzDampingHistory::default()
+            } else {
+                HertzDampingHistory { force: force[l] }
+            };
+        }
     }
 }

@@ -3,6 +3,7 @@
 
 use glam::DVec3;
 use talus_contact::*;
+use talus_core::lanes::{F4, V4};
 
 use crate::analytic::{hertz_contact_time, hertz_max_overlap, hertz_stiffness};
 use crate::params::{HertzModuli, NORMAL_PARAMS, characteristic_velocity, validate_elastic};
@@ -105,5 +106,52 @@ impl SubModel for HertzNormal {
         s.integration_error += 0.5 * (h.force + force).dot(displacement) + energy - h.energy;
         h.force = force;
         h.energy = energy;
+    }
+
+    const LANES: bool = true;
+
+    #[inline(always)]
+    fn evaluate_lanes(
+        p: [&HertzNormalParams; 4],
+        kin: &ContactKinematicsLanes,
+        h: [&mut HertzNormalHistory; 4],
+        s: &mut ContactStateLanes,
+        _dt: f64,
+        book: bool,
+    ) {
+        let zero = F4::zero();
+        let delta = kin.overlap;
+        let released = delta.le(zero);
+        let modulus = F4::from_fn(|l| p[l].effective_modulus);
+        let stiffness = F4::splat(2.0) * modulus * (kin.effective_radius * delta).sqrt();
+        let magnitude = F4::splat(2.0 / 3.0) * stiffness * delta;
+        let energy = F4::splat(0.4) * magnitude * delta;
+        let force = kin.normal * magnitude;
+        // Lanes that released keep the zero elastic force and stiffness of the state.
+        s.normal_elastic = released.select(zero, magnitude);
+        s.normal_stiffness = released.select(zero, stiffness);
+        if book {
+            let displacement = kin.displacement;
+            let old_force = V4::from_fn(|l| h[l].force);
+            let old_energy = F4::from_fn(|l| h[l].energy);
+            let half = F4::splat(0.5);
+            let error = released.select(
+                half * old_force.dot(displacement) - old_energy,
+                half * (old_force + force).dot(displacement) + energy - old_energy,
+            );
+            s.elastic_energy = released.select(s.elastic_energy, s.elastic_energy + energy);
+            s.integration_error = s.integration_error + error;
+        }
+        let (force, energy, released) = (force.to_array(), energy.to_array(), released.bits());
+        for (l, h) in h.into_iter().enumerate() {
+            *h = if released >> l & 1 == 1 {
+                HertzNormalHistory::default()
+            } else {
+                HertzNormalHistory {
+                    force: force[l],
+                    energy: energy[l],
+                }
+            };
+        }
     }
 }

@@ -4,7 +4,8 @@
 
 use glam::DVec3;
 use talus_contact::*;
-use talus_linear_spring::rotate_into_plane;
+use talus_core::lanes::{F4, M4, V4};
+use talus_linear_spring::{rotate_into_plane, rotate_into_plane_lanes};
 
 use crate::analytic::{
     damping_from_restitution, hertz_max_overlap, hertz_stiffness, mindlin_stiffness,
@@ -177,6 +178,100 @@ impl SubModel for MindlinTangential {
         h.stiffness = kt;
         h.energy = energy;
     }
+
+    const LANES: bool = true;
+
+    #[inline(always)]
+    fn evaluate_lanes(
+        p: [&MindlinParams; 4],
+        kin: &ContactKinematicsLanes,
+        h: [&mut MindlinHistory; 4],
+        s: &mut ContactStateLanes,
+        _dt: f64,
+        book: bool,
+    ) {
+        let zero = F4::zero();
+        let (half, minus_half) = (F4::splat(0.5), F4::splat(-0.5));
+        let displacement = kin.displacement;
+        let n = kin.normal;
+        let tangential_displacement = displacement - n * n.dot(displacement);
+        let old_spring = V4::from_fn(|l| h[l].spring);
+        let old_dashpot = V4::from_fn(|l| h[l].dashpot);
+        let rotated = rotate_into_plane_lanes(old_spring, n);
+        let released = kin.overlap.le(zero);
+        let friction = F4::from_fn(|l| p[l].friction);
+        // Lanes that touch with friction; those that touch without keep everything.
+        let acting = released.not().and(friction.gt(zero));
+
+        let shear_modulus = F4::from_fn(|l| p[l].effective_shear_modulus);
+        let kt = F4::splat(8.0) * shear_modulus * (kin.effective_radius * kin.overlap).sqrt();
+        let cap = friction * s.normal_force().abs();
+        let trial = rotated - tangential_displacement * kt;
+        let trial_squared = trial.length_squared();
+        let slides = trial_squared.gt(cap * cap);
+        let slid_spring = trial * (cap / trial_squared.sqrt());
+        let ct = F4::from_fn(|l| p[l].damping_ratio) * s.damping_coefficient;
+        let free_dashpot = kin.tangential_velocity * -ct;
+        let stuck_dashpot = free_dashpot * dashpot_share_lanes(trial, free_dashpot, cap);
+        let spring = slides.select3(slid_spring, trial);
+        let dashpot = slides.select3(V4::zero(), stuck_dashpot);
+        let energy = half * spring.length_squared() / kt;
+        s.tangential_force = acting.select3(spring + dashpot, s.tangential_force);
+
+        if book {
+            let rotation_error =
+                half * (old_spring.dot(displacement) - rotated.dot(tangential_displacement));
+            let old_stiffness = F4::from_fn(|l| h[l].stiffness);
+            let old_energy = F4::from_fn(|l| h[l].energy);
+            // Channel 0: the dashpot's work; 1: the slider's; 2: the stiffness change.
+            let released_trial = rotated - tangential_displacement * old_stiffness;
+            let released_slip = half * rotated.dot(released_trial) / old_stiffness;
+            let slip = half * (rotated + slid_spring).dot(trial - slid_spring) / kt;
+            let stiffness_change = half * old_spring.length_squared() / kt - old_energy;
+            let base = s.channel_base;
+            let add = |total: F4, mask: M4, x: F4| mask.select(total + x, total);
+            s.dissipated[base + 1] = add(s.dissipated[base + 1], acting.and(slides), slip);
+            s.dissipated[base + 2] = add(s.dissipated[base + 2], acting, -stiffness_change);
+            s.integration_error = add(s.integration_error, acting.or(released), rotation_error);
+            s.elastic_energy = add(s.elastic_energy, acting, energy);
+            let dashpot_work = released.select(
+                minus_half * old_dashpot.dot(displacement),
+                minus_half * (old_dashpot + dashpot).dot(displacement),
+            );
+            s.dissipated[base] = add(s.dissipated[base], acting.or(released), dashpot_work);
+            let releases_spring = released.and(old_stiffness.gt(zero));
+            s.dissipated[base + 1] = add(s.dissipated[base + 1], releases_spring, released_slip);
+        }
+        let (spring, dashpot) = (spring.to_array(), dashpot.to_array());
+        let (kt, energy) = (kt.to_array(), energy.to_array());
+        let (released, acting) = (released.bits(), acting.bits());
+        for (l, h) in h.into_iter().enumerate() {
+            if released >> l & 1 == 1 {
+                *h = MindlinHistory::default();
+            } else if acting >> l & 1 == 1 {
+                *h = MindlinHistory {
+                    spring: spring[l],
+                    dashpot: dashpot[l],
+                    stiffness: kt[l],
+                    energy: energy[l],
+                };
+            }
+        }
+    }
+}
+
+/// [`dashpot_share`] in lanes, bit for bit.
+#[inline(always)]
+fn dashpot_share_lanes(spring: V4, dashpot: V4, cap: F4) -> F4 {
+    let d2 = dashpot.length_squared();
+    let fits = (spring + dashpot)
+        .length_squared()
+        .le(cap * cap)
+        .or(d2.eq(F4::zero()));
+    let b = spring.dot(dashpot);
+    let c = spring.length_squared() - cap * cap;
+    let share = ((-b + (b * b - d2 * c).max(F4::zero()).sqrt()) / d2).clamp(0.0, 1.0);
+    fits.select(F4::splat(1.0), share)
 }
 
 /// The share s ∈ [0, 1] of the dashpot force `dashpot` that keeps |spring + s·dashpot|

@@ -12,9 +12,9 @@ use talus_core::lanes::{F4, V4};
 
 use crate::{LinearParams, NormalDamping, TangentialSpring};
 
-/// [`crate::rotate_into_plane`] in lanes.
+/// [`crate::rotate_into_plane`] in lanes, bit for bit.
 #[inline(always)]
-fn rotate_into_plane(spring: V4, n: V4) -> V4 {
+pub fn rotate_into_plane(spring: V4, n: V4) -> V4 {
     let projected = spring - n * n.dot(spring);
     let len2 = projected.length_squared();
     len2.gt(F4::zero()).select3(

@@ -14,6 +14,7 @@
 //! (docs/physics/contact-onset.md).
 
 mod lanes;
+pub use lanes::rotate_into_plane as rotate_into_plane_lanes;
 pub mod parts;
 
 use std::any::Any;

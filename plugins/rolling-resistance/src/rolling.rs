@@ -13,6 +13,7 @@ use std::marker::PhantomData;
 use glam::DVec3;
 use talus_contact::compose::is_two_dimensional;
 use talus_contact::*;
+use talus_core::lanes::{F4, M4, V4};
 use talus_linear_spring::rotate_into_plane;
 
 use crate::element::{
@@ -180,6 +181,55 @@ impl SubModel for ConstantTorque {
         h.torque = torque;
         s.torque_a += torque;
         s.torque_b -= torque;
+    }
+
+    const LANES: bool = true;
+
+    #[inline(always)]
+    fn evaluate_lanes(
+        p: [&ConstantTorqueParams; 4],
+        kin: &ContactKinematicsLanes,
+        h: [&mut TorqueHistory; 4],
+        s: &mut ContactStateLanes,
+        dt: f64,
+        book: bool,
+    ) {
+        let zero = F4::zero();
+        let released = kin.overlap.le(zero);
+        let omega = kin.relative_omega;
+        let n = kin.normal;
+        // Disks keep only the z component of rotation (`rolling_part`).
+        let planar = M4::from_bits((0..4).map(|l| u32::from(p[l].planar) << l).sum());
+        let spatial = omega - n * n.dot(omega);
+        let rate = V4 {
+            x: planar.select(zero, spatial.x),
+            y: planar.select(zero, spatial.y),
+            z: planar.select(omega.z, spatial.z),
+        };
+        let speed = rate.length();
+        let friction = F4::from_fn(|l| p[l].friction);
+        // `torque_limit`: μ F_n⁺ R*.
+        let limit = friction * s.normal_force().max(zero) * kin.effective_radius;
+        // `speed > 0` is also false for NaN: no direction, no torque.
+        let torque = speed.gt(zero).select3(rate * (-limit / speed), V4::zero());
+        let torque = released.select3(V4::zero(), torque);
+        if book {
+            let full_increment = omega * F4::splat(dt);
+            let old = V4::from_fn(|l| h[l].torque);
+            let minus_half = F4::splat(-0.5);
+            let work = released.select(
+                minus_half * old.dot(full_increment),
+                minus_half * (old + torque).dot(full_increment),
+            );
+            s.dissipate(0, work);
+        }
+        let contact = released.not();
+        s.torque_a = contact.select3(s.torque_a + torque, s.torque_a);
+        s.torque_b = contact.select3(s.torque_b - torque, s.torque_b);
+        let torque = torque.to_array();
+        for (l, h) in h.into_iter().enumerate() {
+            h.torque = torque[l];
+        }
     }
 }
 
