@@ -575,12 +575,9 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
         if !Self::LANES || lanes == 0 {
             return (0, LaneResponse::default());
         }
-        // The parts evaluate all four lanes on copies; only the offered lanes keep theirs.
-        let mut local: [Self::History; 4] = std::array::from_fn(|l| history[l].clone());
         let mut s = ContactStateLanes::default();
         let b = Self::BASES;
-        {
-            let [h0, h1, h2, h3] = &mut local;
+        let mut run = |[h0, h1, h2, h3]: [&mut Self::History; 4]| {
             macro_rules! part {
                 ($field:ident) => {
                     (
@@ -609,10 +606,18 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
             s.channel_base = b[5];
             let (pp, hh) = part!(twisting);
             W::evaluate_lanes(pp, kin, hh, &mut s, dt, book);
-        }
-        for (l, (h, new)) in history.into_iter().zip(local).enumerate() {
-            if lanes >> l & 1 == 1 {
-                *h = new;
+        };
+        if lanes == 0xF {
+            run(history);
+        } else {
+            // The parts evaluate all four lanes, here on copies; only the offered lanes
+            // keep theirs.
+            let mut local: [Self::History; 4] = std::array::from_fn(|l| history[l].clone());
+            run(local.each_mut());
+            for (l, (h, new)) in history.into_iter().zip(local).enumerate() {
+                if lanes >> l & 1 == 1 {
+                    *h = new;
+                }
             }
         }
         let response = LaneResponse {
