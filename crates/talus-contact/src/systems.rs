@@ -115,7 +115,7 @@ impl Plugin for ContactPlugin {
 /// Evaluates law `L` on all of its contacts in parallel, writing geometry, force and
 /// torques into each contact entity, and appending the contacts' energies, summed per
 /// chunk of [`ENERGY_CHUNK_LEN`] contacts in table order, to [`ContactEnergyPartials`].
-#[allow(clippy::type_complexity)]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn evaluate_law<L: ContactLaw>(
     snapshot: Res<GrainSnapshot>,
     clock: Res<Clock>,

@@ -269,6 +269,7 @@ pub fn kinetic_energy(
     for (v, w, m, i, f, t) in grains.contiguous_iter().expect("grain query is dense") {
         // Four grains at a time, each lane summing every fourth grain of the chunk; the
         // lanes are added in a fixed order at the end of the chunk.
+        #[allow(clippy::type_complexity)]
         let sums = |((v, w), (m, i)): (
             (&[Velocity], &[AngularVelocity]),
             (&[Mass], &[MomentOfInertia]),

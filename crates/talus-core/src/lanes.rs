@@ -296,7 +296,7 @@ impl F4 {
     /// `f64::max` lane by lane: the larger; the other where one is NaN; `self` on a tie.
     #[inline(always)]
     pub fn max(self, other: Self) -> Self {
-        other.gt(self).or(self.eq(self).not()).select(other, self)
+        other.gt(self).or(!self.eq(self)).select(other, self)
     }
 
     /// `f64::clamp(lo, hi)` lane by lane (NaN stays NaN).
@@ -345,11 +345,6 @@ impl M4 {
         Self(imp::or(self.0, other.0))
     }
 
-    /// The opposite mask.
-    #[inline(always)]
-    pub fn not(self) -> Self {
-        Self(imp::not(self.0))
-    }
 
     /// `a` where the mask is true, `b` elsewhere.
     #[inline(always)]
@@ -365,6 +360,15 @@ impl M4 {
             y: self.select(a.y, b.y),
             z: self.select(a.z, b.z),
         }
+    }
+}
+
+impl std::ops::Not for M4 {
+    type Output = M4;
+    /// The opposite mask.
+    #[inline(always)]
+    fn not(self) -> M4 {
+        M4(imp::not(self.0))
     }
 }
 
@@ -434,8 +438,8 @@ impl V4 {
 
     /// Each lane's vector `f(lane)`.
     #[inline(always)]
-    pub fn from_fn(mut f: impl FnMut(usize) -> DVec3) -> Self {
-        Self::new(std::array::from_fn(|k| f(k)))
+    pub fn from_fn(f: impl FnMut(usize) -> DVec3) -> Self {
+        Self::new(std::array::from_fn(f))
     }
 
     /// The lanes as vectors.
@@ -492,10 +496,14 @@ impl V4 {
         }
     }
 
+}
+
+impl std::ops::Div<F4> for V4 {
+    type Output = V4;
     /// Each component divided by `s` (`DVec3 / f64`).
     #[inline(always)]
-    pub fn div(self, s: F4) -> Self {
-        Self {
+    fn div(self, s: F4) -> V4 {
+        V4 {
             x: self.x / s,
             y: self.y / s,
             z: self.z / s,
@@ -609,7 +617,7 @@ mod tests {
                 m.select(fa, fb),
                 std::array::from_fn(|k| if a[k] < b[k] { a[k] } else { b[k] }),
             );
-            assert_eq!(m.not().bits(), !m.bits() & 0xF);
+            assert_eq!((!m).bits(), !m.bits() & 0xF);
             assert_eq!(M4::from_bits(m.bits()).bits(), m.bits());
         }
     }
@@ -638,7 +646,7 @@ mod tests {
         same3(-va, std::array::from_fn(|k| -a[k]));
         let s = F4::new([0.5, -2.0, 1e-3, 7.0]);
         same3(va * s, std::array::from_fn(|k| a[k] * s.to_array()[k]));
-        same3(va.div(s), std::array::from_fn(|k| a[k] / s.to_array()[k]));
+        same3(va / s, std::array::from_fn(|k| a[k] / s.to_array()[k]));
         let dots = va.dot(vb).to_array();
         let lengths = va.length().to_array();
         for k in 0..4 {

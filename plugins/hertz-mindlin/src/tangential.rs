@@ -201,7 +201,7 @@ impl SubModel for MindlinTangential {
         let released = kin.overlap.le(zero);
         let friction = F4::from_fn(|l| p[l].friction);
         // Lanes that touch with friction; those that touch without keep everything.
-        let acting = released.not().and(friction.gt(zero));
+        let acting = (!released).and(friction.gt(zero));
 
         let shear_modulus = F4::from_fn(|l| p[l].effective_shear_modulus);
         let kt = F4::splat(8.0) * shear_modulus * (kin.effective_radius * kin.overlap).sqrt();

@@ -253,7 +253,7 @@ pub(crate) fn evaluate(
     let ft_len = ft_trial.length();
     let slip = ft_len.gt(cap);
     let ft_capped = ft_trial * (cap / ft_len);
-    let xi_capped = (-(ft_capped + vt * ct)).div(kt);
+    let xi_capped = -(ft_capped + vt * ct) / kt;
     let xi = slip.select3(xi_capped, trial);
     let ft = sliding.select3(slip.select3(ft_capped, ft_trial), V4::zero());
     let tangential_dashpot = vt * -ct;

@@ -223,7 +223,7 @@ impl SubModel for ConstantTorque {
             );
             s.dissipate(0, work);
         }
-        let contact = released.not();
+        let contact = !released;
         s.torque_a = contact.select3(s.torque_a + torque, s.torque_a);
         s.torque_b = contact.select3(s.torque_b - torque, s.torque_b);
         let torque = torque.to_array();
