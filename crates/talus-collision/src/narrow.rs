@@ -238,7 +238,8 @@ fn update_contacts_inner(
     // Each chunk of grains owns its slice of the index: the overlap tests and the listing
     // of new pairs run in parallel; only spawning and despawning entities, which change
     // the world's tables, are serial.
-    per_grain
+    let per_grain_view: &[GrainContacts] = per_grain;
+    per_grain_view
         .par_chunks(CHUNK)
         .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
@@ -253,7 +254,18 @@ fn update_contacts_inner(
                 range,
                 gap_threshold,
             };
-            narrow_chunk(&pass_state, chunk * CHUNK, entries, candidates, new);
+            // While this chunk is tested, the next chunk's contact lists and grains are
+            // asked for, a few lines per batch of pairs: a chunk's pairs read them in no
+            // order the hardware can follow, and a large packing's do not fit in cache.
+            let mut ahead = talus_core::snapshot::LinePrefetcher::new();
+            let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
+            if !next.is_empty() {
+                ahead.add(&per_grain_view[next.clone()]);
+                ahead.add(&s.position[next.clone()]);
+                ahead.add(&s.radius[next.clone()]);
+                ahead.add(&s.inverse_mass[next]);
+            }
+            narrow_chunk(&pass_state, chunk * CHUNK, entries, candidates, new, &mut ahead);
         });
     // A contact ends when its bodies neither touch now nor carried a force at its last
     // evaluation (one that did is kept for one more evaluation, so that its law books the
@@ -494,6 +506,7 @@ fn narrow_chunk(
     entries: &[GrainContacts],
     candidates: &CandidateChunk,
     new: &mut Vec<(u32, u32)>,
+    ahead: &mut talus_core::snapshot::LinePrefetcher,
 ) {
     let PassState {
         s,
@@ -551,6 +564,7 @@ fn narrow_chunk(
     for (local, partner) in locals.zip(partners) {
         let local: [u8; 4] = local.try_into().expect("four pairs");
         let partner: [u32; 4] = partner.try_into().expect("four pairs");
+        ahead.step(2);
         test(local.map(|l| base + l as usize), partner, 0xF);
     }
     if !local_rest.is_empty() {

@@ -252,6 +252,67 @@ pub fn prefetch_all<T>(data: &[T]) {
     let _ = data;
 }
 
+/// Asks for a few slices' cache lines a few at a time, spread over a loop's iterations
+/// ([`Self::step`]): for data the loop after this one will read in an order the hardware
+/// cannot guess. (Asking for all of it at once would overflow the processor's queue of
+/// outstanding misses.)
+pub struct LinePrefetcher {
+    ranges: Vec<(*const i8, usize)>,
+    range: usize,
+    offset: usize,
+}
+
+// SAFETY: the pointers are only given to prefetch hints, which read nothing.
+unsafe impl Send for LinePrefetcher {}
+
+impl LinePrefetcher {
+    /// A prefetcher over nothing yet.
+    pub fn new() -> Self {
+        Self {
+            ranges: Vec::new(),
+            range: 0,
+            offset: 0,
+        }
+    }
+
+    /// Adds a slice to ask for, after those added before.
+    pub fn add<T>(&mut self, data: &[T]) {
+        self.ranges
+            .push((data.as_ptr().cast(), std::mem::size_of_val(data)));
+    }
+
+    /// Asks for the next `lines` cache lines (none once every slice is asked for).
+    #[inline]
+    pub fn step(&mut self, lines: usize) {
+        for _ in 0..lines {
+            let Some(&(start, len)) = self.ranges.get(self.range) else {
+                return;
+            };
+            if self.offset >= len {
+                self.range += 1;
+                self.offset = 0;
+                continue;
+            }
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: a prefetch only hints the cache; the address lies inside a slice
+            // given to `add`, and nothing is read or written through it.
+            unsafe {
+                use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+                _mm_prefetch::<_MM_HINT_T0>(start.add(self.offset));
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            let _ = start;
+            self.offset += 64;
+        }
+    }
+}
+
+impl Default for LinePrefetcher {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// Grains per parallel work unit of the snapshot's copies.
 const COPY_CHUNK: usize = 4096;
 
