@@ -8,6 +8,11 @@ use std::path::Path;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
+/// The `talus` binary's allocator (large blocks on huge pages), so that the bench measures
+/// what a run measures.
+#[global_allocator]
+static ALLOCATOR: talus::cli::alloc::HugePageAllocator = talus::cli::alloc::HugePageAllocator;
+
 fn chute(replicate: u32) -> (talus::core::schedule::Simulation, usize) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench");
     let base = std::fs::read_to_string(root.join("chute.ron")).expect("scenes/bench/chute.ron");

@@ -137,7 +137,8 @@ fn a_settling_pile_in_a_box_is_the_same_with_lanes() {
 
 #[test]
 fn a_frictionless_pile_is_the_same_with_lanes() {
-    let text = common::settling_box_scene("lanes-frictionless", 6000).replace("friction: 0.5", "friction: 0.0");
+    let text = common::settling_box_scene("lanes-frictionless", 6000)
+        .replace("friction: 0.5", "friction: 0.0");
     assert!(text.contains("friction: 0.0"));
     same_with_and_without_lanes("frictionless box", &text, 6000);
 }
@@ -249,7 +250,11 @@ fn lanes_match_scalar<L: ContactLaw>(params: [L::Params; 4], steps: usize) {
                 let mut scalar_history = history[l].clone();
                 let s = L::evaluate(&params[l], &kin[l], &mut scalar_history, dt);
                 if offered >> l & 1 == 0 {
-                    assert_eq!(text(&lane_history[l]), text(&history[l]), "step {step}: lane {l}");
+                    assert_eq!(
+                        text(&lane_history[l]),
+                        text(&history[l]),
+                        "step {step}: lane {l}"
+                    );
                     continue;
                 }
                 let at = format!("step {step}, lane {l}, book {book}");
@@ -258,8 +263,16 @@ fn lanes_match_scalar<L: ContactLaw>(params: [L::Params; 4], steps: usize) {
                 assert_eq!(bits(r.torque_b.to_array()[l]), bits(s.torque_b), "{at}");
                 assert_eq!(text(&lane_history[l]), text(&scalar_history), "{at}");
                 if book {
-                    assert_eq!(r.elastic_energy.to_array()[l].to_bits(), s.elastic_energy.to_bits(), "{at}");
-                    assert_eq!(r.integration_error.to_array()[l].to_bits(), s.integration_error.to_bits(), "{at}");
+                    assert_eq!(
+                        r.elastic_energy.to_array()[l].to_bits(),
+                        s.elastic_energy.to_bits(),
+                        "{at}"
+                    );
+                    assert_eq!(
+                        r.integration_error.to_array()[l].to_bits(),
+                        s.integration_error.to_bits(),
+                        "{at}"
+                    );
                     for (c, d) in r.dissipated.iter().zip(s.dissipated) {
                         assert_eq!(c.to_array()[l].to_bits(), d.to_bits(), "{at}");
                     }
@@ -273,7 +286,10 @@ fn lanes_match_scalar<L: ContactLaw>(params: [L::Params; 4], steps: usize) {
             previous_overlap[l] = kin[l].overlap;
         }
     }
-    assert!(onsets >= 8 && releases >= 8, "contacts must start and end ({onsets}, {releases})");
+    assert!(
+        onsets >= 8 && releases >= 8,
+        "contacts must start and end ({onsets}, {releases})"
+    );
 }
 
 #[test]
@@ -325,7 +341,9 @@ fn the_hertz_chute_flow_is_the_same_with_lanes() {
         sim.world.insert_resource(LaneForms(lanes));
         sim.prime().unwrap();
         sim.run_steps(60).unwrap();
-        let mut q = sim.world.query::<(&Contact, &ContactGeometry, &ContactForce)>();
+        let mut q = sim
+            .world
+            .query::<(&Contact, &ContactGeometry, &ContactForce)>();
         let contacts: BTreeMap<(u64, u64), Vec<u64>> = q
             .iter(&sim.world)
             .map(|(c, g, f)| {
@@ -338,7 +356,14 @@ fn the_hertz_chute_flow_is_the_same_with_lanes() {
                 ((c.a.to_bits(), c.b.to_bits()), values)
             })
             .collect();
-        (grain_bits(&mut sim.world), contacts, energy_bits(&sim.world))
+        (
+            grain_bits(&mut sim.world),
+            contacts,
+            energy_bits(&sim.world),
+        )
     };
-    assert!(run(true) == run(false), "the lane form changed the Hertz chute");
+    assert!(
+        run(true) == run(false),
+        "the lane form changed the Hertz chute"
+    );
 }

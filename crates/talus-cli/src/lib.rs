@@ -5,6 +5,7 @@
 //! never names a law.
 
 pub mod accuracy;
+pub mod alloc;
 pub mod report;
 pub mod run;
 

@@ -295,7 +295,8 @@ pub fn run_scene(
                 .iter()
                 .map(|s| (s.name().to_string(), timings.get(*s)))
                 .collect(),
-            grain_steps_per_second: built.grain_count as f64 * steps_run.saturating_sub(first_step) as f64
+            grain_steps_per_second: built.grain_count as f64
+                * steps_run.saturating_sub(first_step) as f64
                 / stepping.max(1e-12),
         },
         blow_up: None,

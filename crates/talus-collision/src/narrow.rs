@@ -265,7 +265,14 @@ fn update_contacts_inner(
                 ahead.add(&s.radius[next.clone()]);
                 ahead.add(&s.inverse_mass[next]);
             }
-            narrow_chunk(&pass_state, chunk * CHUNK, entries, candidates, new, &mut ahead);
+            narrow_chunk(
+                &pass_state,
+                chunk * CHUNK,
+                entries,
+                candidates,
+                new,
+                &mut ahead,
+            );
         });
     // A contact ends when its bodies neither touch now nor carried a force at its last
     // evaluation (one that did is kept for one more evaluation, so that its law books the

@@ -231,7 +231,11 @@ pub fn update_neighbour_list(
             let base = chunk * CHUNK;
             // (Only used where the box is not sheared.)
             let image = NearestImage::default().lanes();
-            let image = if s.is_sheared() { image } else { s.image_lanes() };
+            let image = if s.is_sheared() {
+                image
+            } else {
+                s.image_lanes()
+            };
             let reader = s.reader();
             for i in base..(base + CHUNK).min(n) {
                 let p = s.position[i];
@@ -272,9 +276,18 @@ pub fn update_neighbour_list(
                         count += usize::from(j as usize > i);
                     }
                 }
-                candidates_after(s, &reader, &image, i, &after[..count], range, skin, |j, gap| {
-                    keys.push(pair_key(gap, i - base, j));
-                });
+                candidates_after(
+                    s,
+                    &reader,
+                    &image,
+                    i,
+                    &after[..count],
+                    range,
+                    skin,
+                    |j, gap| {
+                        keys.push(pair_key(gap, i - base, j));
+                    },
+                );
             }
             out.fill(&mut keys, &mut scratch);
         });

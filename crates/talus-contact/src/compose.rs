@@ -22,8 +22,8 @@ use crate::law::{
     ContactLaw, ContactResponse, LaneResponse, LawDescriptor, PairAssignment, TimeScale,
     install_law,
 };
-use talus_core::lanes::{F4, V4};
 use crate::params::{ParamError, ParamSpec, ParamValues};
+use talus_core::lanes::{F4, V4};
 
 /// The place of a sub-model in a composed law, which is also its evaluation order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -582,7 +582,12 @@ impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubMode
                 ($field:ident) => {
                     (
                         [&p[0].$field, &p[1].$field, &p[2].$field, &p[3].$field],
-                        [&mut h0.$field, &mut h1.$field, &mut h2.$field, &mut h3.$field],
+                        [
+                            &mut h0.$field,
+                            &mut h1.$field,
+                            &mut h2.$field,
+                            &mut h3.$field,
+                        ],
                     )
                 };
             }

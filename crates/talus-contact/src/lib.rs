@@ -24,8 +24,8 @@ pub mod systems;
 pub use components::*;
 pub use compose::{
     Absent, Composed, ComposedHistory, ComposedLaw, ComposedParams, ContactState,
-    ContactStateLanes, Needs,
-    NoCohesion, NoDamping, NoRolling, NoTwisting, SubModel, SubModelKind, is_two_dimensional,
+    ContactStateLanes, Needs, NoCohesion, NoDamping, NoRolling, NoTwisting, SubModel, SubModelKind,
+    is_two_dimensional,
 };
 pub use kinematics::{ContactKinematics, ContactKinematicsLanes, SpinLanes};
 pub use law::*;

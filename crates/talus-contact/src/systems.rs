@@ -10,6 +10,7 @@ use crate::components::*;
 use crate::kinematics::{ContactKinematics, ContactKinematicsLanes};
 use crate::law::{ContactLaw, LawChannels, PairParams};
 use talus_core::lanes::{F4, V4};
+use talus_core::snapshot::prefetch_item;
 
 /// Contacts per chunk of the force loop: each chunk is evaluated on one thread and sums
 /// its contacts' energies into one [`ContactEnergySums`]. Fixed, not derived from the
@@ -310,7 +311,9 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
     }
     for k in k..n {
         prefetch(d, k + PREFETCH_AHEAD);
-        evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], &mut sums, BOOK);
+        evaluate(
+            &c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], &mut sums, BOOK,
+        );
     }
     // The contacts that carried no force: the few the next narrow phase may end. (Every
     // contact is counted in `sums.active` or listed here.)
@@ -389,7 +392,13 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
         valid |= u32::from(current) << k;
     }
     // Lanes left out read grain 0 (there is one: these contacts have grains).
-    let index = |k: usize, body: u32| if valid >> k & 1 == 1 { body as usize } else { 0 };
+    let index = |k: usize, body: u32| {
+        if valid >> k & 1 == 1 {
+            body as usize
+        } else {
+            0
+        }
+    };
     let i: [usize; 4] = std::array::from_fn(|k| index(k, d[k].a));
     let j: [usize; 4] = std::array::from_fn(|k| index(k, d[k].b));
     let mut done = 0;
@@ -413,22 +422,32 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
             // The integrator turns the old force with the old branch vectors and the new
             // force with the new ones; the law worked both over the mean (as the scalar
             // path books it).
-            let shift_work = old_force.map(|old| (old - r.force).dot(branch_shift) * F4::splat(0.25));
+            let shift_work =
+                old_force.map(|old| (old - r.force).dot(branch_shift) * F4::splat(0.25));
             out = Some((kin, r, torque_a, torque_b, shift_work));
         }
     }
     let Some((kin, r, torque_a, torque_b, shift_work)) = out else {
         for k in 0..4 {
-            evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], sums, BOOK);
+            evaluate(
+                &c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], sums, BOOK,
+            );
         }
         return;
     };
-    let (normal, overlap, point) = (kin.normal.to_array(), kin.overlap.to_array(), kin.point.to_array());
-    let (force, torque_a, torque_b) = (r.force.to_array(), torque_a.to_array(), torque_b.to_array());
+    let (normal, overlap, point) = (
+        kin.normal.to_array(),
+        kin.overlap.to_array(),
+        kin.point.to_array(),
+    );
+    let (force, torque_a, torque_b) =
+        (r.force.to_array(), torque_a.to_array(), torque_b.to_array());
     let min_radius = kin.min_radius.to_array();
     for k in 0..4 {
         if done >> k & 1 == 0 {
-            evaluate(&c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], sums, BOOK);
+            evaluate(
+                &c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], sums, BOOK,
+            );
             continue;
         }
         // Field by field: a whole struct written at once went through a copy on the
@@ -441,7 +460,10 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
         forces.torque_a = torque_a[k];
         forces.torque_b = torque_b[k];
         // The indices are those the lanes read, and still current.
-        debug_assert_eq!((d[k].a, d[k].b, d[k].layout), (i[k] as u32, j[k] as u32, s.layout));
+        debug_assert_eq!(
+            (d[k].a, d[k].b, d[k].layout),
+            (i[k] as u32, j[k] as u32, s.layout)
+        );
         sums.active += usize::from(f[k].is_active(&g[k]));
         if overlap[k] >= sums.worst_overlap.0 * min_radius[k] {
             let ratio = overlap[k] / min_radius[k];
@@ -451,8 +473,7 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
         }
         if BOOK && let Some(shift_work) = shift_work {
             sums.elastic += r.elastic_energy.to_array()[k];
-            sums.integration_error +=
-                r.integration_error.to_array()[k] + shift_work.to_array()[k];
+            sums.integration_error += r.integration_error.to_array()[k] + shift_work.to_array()[k];
             for (total, channel) in sums.dissipated.iter_mut().zip(&r.dissipated) {
                 *total += channel.to_array()[k];
             }
@@ -671,7 +692,11 @@ fn sum_range(
     force.fill(Force(DVec3::ZERO));
     torque.fill(Torque(DVec3::ZERO));
     // Adds one side of a contact; `b_side` for the second body, whose force is opposite.
-    let mut add = |b: &ContactBodies, f: &ContactForce, b_side: bool| {
+    let add = |force: &mut [Force],
+               torque: &mut [Torque],
+               b: &ContactBodies,
+               f: &ContactForce,
+               b_side: bool| {
         if b_side {
             let j = b.b as usize - first;
             force[j].0 -= f.force;
@@ -683,14 +708,24 @@ fn sum_range(
         }
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
+    let ask_ahead = len >= SUM_AHEAD_FROM_GRAINS;
     if !pick {
         for &(bodies, forces) in tables {
-            for (b, f) in bodies.iter().zip(forces) {
+            for (row, (b, f)) in bodies.iter().zip(forces).enumerate() {
+                // The table is in the order of its first bodies, so the first sides' totals
+                // are read in order; the second bodies' are not, and at large sizes they
+                // miss the cache: ask for them a few contacts ahead (only then: in cache,
+                // the requests cost more than they save).
+                if let Some(ahead) = bodies.get(row + SUM_AHEAD).filter(|_| ask_ahead) {
+                    let j = (ahead.b as usize).wrapping_sub(first);
+                    prefetch_item(force, j);
+                    prefetch_item(torque, j);
+                }
                 if in_range(b.a) {
-                    add(b, f, false);
+                    add(force, torque, b, f, false);
                 }
                 if in_range(b.b) {
-                    add(b, f, true);
+                    add(force, torque, b, f, true);
                 }
             }
         }
@@ -709,13 +744,29 @@ fn sum_range(
                 picked[count] = code | 1;
                 count += usize::from(in_range(b.b));
             }
-            for &code in &picked[..count] {
+            for k in 0..count {
+                let code = picked[k];
+                if ask_ahead && k + SUM_AHEAD < count {
+                    let ahead = picked[k + SUM_AHEAD];
+                    let b = &bodies[(ahead >> 1) as usize];
+                    let j = if ahead & 1 == 1 { b.b } else { b.a } as usize;
+                    prefetch_item(force, j.wrapping_sub(first));
+                    prefetch_item(torque, j.wrapping_sub(first));
+                }
                 let row = (code >> 1) as usize;
-                add(&bodies[row], &forces[row], code & 1 == 1);
+                add(force, torque, &bodies[row], &forces[row], code & 1 == 1);
             }
         }
     }
 }
+
+/// How many contacts (or picked sides) ahead [`sum_range`] asks for the totals it will add
+/// to.
+const SUM_AHEAD: usize = 16;
+
+/// From how many grains in its range [`sum_range`] asks for totals ahead: fewer grains'
+/// totals (48 bytes a grain) stay in a core's cache.
+const SUM_AHEAD_FROM_GRAINS: usize = 65_536;
 
 /// Contacts whose sides [`sum_range`] picks at a time.
 const PICK_BLOCK: usize = 2048;

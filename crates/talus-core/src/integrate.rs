@@ -120,7 +120,10 @@ fn rotation_kick(
         if w.len() >= PARALLEL_THRESHOLD {
             // Chunks, each a plain loop: rayon's per-item plumbing costs more than a kick.
             w.par_chunks_mut(PARALLEL_THRESHOLD)
-                .zip(t.par_chunks(PARALLEL_THRESHOLD).zip(i.par_chunks(PARALLEL_THRESHOLD)))
+                .zip(
+                    t.par_chunks(PARALLEL_THRESHOLD)
+                        .zip(i.par_chunks(PARALLEL_THRESHOLD)),
+                )
                 .for_each(|(w, (t, i))| w.iter_mut().zip(t.iter().zip(i)).for_each(update));
         } else {
             w.iter_mut().zip(t.iter().zip(i.iter())).for_each(update);
@@ -143,7 +146,10 @@ pub fn second_kick_translation(
         let update = |(v, (f, m)): (&mut Velocity, (&Force, &Mass))| v.0 += f.0 * (kick / m.0);
         if v.len() >= PARALLEL_THRESHOLD {
             v.par_chunks_mut(PARALLEL_THRESHOLD)
-                .zip(f.par_chunks(PARALLEL_THRESHOLD).zip(m.par_chunks(PARALLEL_THRESHOLD)))
+                .zip(
+                    f.par_chunks(PARALLEL_THRESHOLD)
+                        .zip(m.par_chunks(PARALLEL_THRESHOLD)),
+                )
                 .for_each(|(v, (f, m))| v.iter_mut().zip(f.iter().zip(m)).for_each(update));
         } else {
             v.iter_mut().zip(f.iter().zip(m.iter())).for_each(update);
@@ -282,7 +288,8 @@ pub fn kinetic_energy(
                 let [g] = g;
                 sums[0] = sums[0] + half * g.m * g.v.length_squared();
                 sums[1] = sums[1] + half * g.i * g.w.length_squared();
-                sums[2] = sums[2] + (linear * g.v.dot(g.f) - quadratic * g.f.length_squared() / g.m);
+                sums[2] =
+                    sums[2] + (linear * g.v.dot(g.f) - quadratic * g.f.length_squared() / g.m);
                 if rotation {
                     sums[2] =
                         sums[2] + (linear * g.w.dot(g.t) - quadratic * g.t.length_squared() / g.i);
@@ -371,7 +378,13 @@ impl Grain4 {
 /// Vectors `k..k + live` of a column in lanes, zero past `live`.
 #[inline(always)]
 fn lanes3<T>(k: usize, live: usize, column: &[T], value: impl Fn(&T) -> DVec3) -> V4 {
-    V4::from_fn(|l| if l < live { value(&column[k + l]) } else { DVec3::ZERO })
+    V4::from_fn(|l| {
+        if l < live {
+            value(&column[k + l])
+        } else {
+            DVec3::ZERO
+        }
+    })
 }
 
 /// Numbers `k..k + live` of a column in lanes, one past `live`.

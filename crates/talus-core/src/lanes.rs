@@ -345,7 +345,6 @@ impl M4 {
         Self(imp::or(self.0, other.0))
     }
 
-
     /// `a` where the mask is true, `b` elsewhere.
     #[inline(always)]
     pub fn select(self, a: F4, b: F4) -> F4 {
@@ -495,7 +494,6 @@ impl V4 {
             z: self.z * s,
         }
     }
-
 }
 
 impl std::ops::Div<F4> for V4 {
@@ -588,7 +586,10 @@ mod tests {
     fn lanes_match_scalar_bit_for_bit() {
         let same = |lanes: F4, scalar: [f64; 4]| {
             for (x, y) in lanes.to_array().iter().zip(scalar) {
-                assert!(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()), "{x} vs {y}");
+                assert!(
+                    x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()),
+                    "{x} vs {y}"
+                );
             }
         };
         for (a, b) in quads() {
@@ -637,7 +638,10 @@ mod tests {
         let (va, vb) = (V4::new(a), V4::new(b));
         let same3 = |x: V4, y: [DVec3; 4]| {
             for (p, q) in x.to_array().iter().zip(y) {
-                assert_eq!(p.to_array().map(f64::to_bits), q.to_array().map(f64::to_bits));
+                assert_eq!(
+                    p.to_array().map(f64::to_bits),
+                    q.to_array().map(f64::to_bits)
+                );
             }
         };
         same3(va.cross(vb), std::array::from_fn(|k| a[k].cross(b[k])));

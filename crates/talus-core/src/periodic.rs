@@ -253,8 +253,16 @@ pub fn wrap_positions(periodic: Res<PeriodicBox>, mut grains: Query<&mut Positio
     let b = *periodic;
     // Almost every grain is inside the box after a step: one test of all axes at once (an
     // axis that does not wrap has infinite bounds), and the full rule for the others.
-    let lo = DVec3::from_array(std::array::from_fn(|a| if b.axes[a] { b.lo[a] } else { f64::NEG_INFINITY }));
-    let hi = DVec3::from_array(std::array::from_fn(|a| if b.axes[a] { b.hi[a] } else { f64::INFINITY }));
+    let lo = DVec3::from_array(std::array::from_fn(|a| {
+        if b.axes[a] {
+            b.lo[a]
+        } else {
+            f64::NEG_INFINITY
+        }
+    }));
+    let hi = DVec3::from_array(std::array::from_fn(|a| {
+        if b.axes[a] { b.hi[a] } else { f64::INFINITY }
+    }));
     let inside = |p: DVec3| {
         (p.x >= lo.x) & (p.x < hi.x) & (p.y >= lo.y) & (p.y < hi.y) & (p.z >= lo.z) & (p.z < hi.z)
     };

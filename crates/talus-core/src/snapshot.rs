@@ -232,6 +232,22 @@ impl GrainSnapshot {
     }
 }
 
+/// Asks the processor to bring the cache line of `data[i]` into the cache, without
+/// waiting: for a loop that will read or update items in an order the hardware cannot
+/// guess. Does nothing for an index out of range, and nothing off x86-64.
+#[inline(always)]
+pub fn prefetch_item<T>(data: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(item) = data.get(i) {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: a prefetch only hints the cache; the address is that of a live item and
+        // nothing is read or written through it.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((item as *const T).cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (data, i);
+}
+
 /// Asks the processor to bring the whole of `data` into the cache, line by line in
 /// order, without waiting: for a loop about to read a small array in an order the
 /// hardware cannot follow (which would otherwise wait for memory at each first touch of a

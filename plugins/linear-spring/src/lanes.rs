@@ -112,13 +112,7 @@ impl Params {
 /// did not approach by more than its overlap, the fixed point of the scalar form's three
 /// passes elsewhere. `damping_force` is the dashpot's force, positive repulsive.
 #[inline(always)]
-fn onset_weight(
-    kin: &ContactKinematicsLanes,
-    k: F4,
-    damping_force: F4,
-    dt: f64,
-    delta: F4,
-) -> F4 {
+fn onset_weight(kin: &ContactKinematicsLanes, k: F4, damping_force: F4, dt: f64, delta: F4) -> F4 {
     let (zero, one) = (F4::zero(), F4::splat(1.0));
     let approach = -kin.normal.dot(kin.displacement);
     let settled = kin.previous_overlap.gt(zero).or(approach.le(delta));
@@ -179,8 +173,7 @@ fn release(
         dissipated: [zero; 3],
     };
     if book {
-        let normal_error =
-            half * (old + kin.normal * pull).dot(displacement) - old_potential;
+        let normal_error = half * (old + kin.normal * pull).dot(displacement) - old_potential;
         let tangential_error = half
             * kt
             * (trial.length_squared()
@@ -269,7 +262,10 @@ pub(crate) fn evaluate(
         let old_normal_dashpot = previous * old.normal_dashpot;
         let half_k = half * k;
         let potential = half_k * delta * delta;
-        let overlapped = kin.previous_overlap.gt(zero).select(kin.previous_overlap, zero);
+        let overlapped = kin
+            .previous_overlap
+            .gt(zero)
+            .select(kin.previous_overlap, zero);
         let normal_error = half * (old_normal_spring + n * spring_force).dot(displacement)
             + potential
             - half_k * (overlapped * overlapped);
@@ -281,12 +277,10 @@ pub(crate) fn evaluate(
             * (trial.length_squared()
                 - old.spring.length_squared()
                 - (old.spring + trial).dot(displacement));
-        let tangential_dashpot_work = zero
-            + minus_half * (old.tangential_dashpot + tangential_dashpot).dot(displacement);
-        out.elastic_energy =
-            sliding.select(potential + half_kt * xi.length_squared(), potential);
-        out.integration_error =
-            sliding.select(normal_error + tangential_error, normal_error);
+        let tangential_dashpot_work =
+            zero + minus_half * (old.tangential_dashpot + tangential_dashpot).dot(displacement);
+        out.elastic_energy = sliding.select(potential + half_kt * xi.length_squared(), potential);
+        out.integration_error = sliding.select(normal_error + tangential_error, normal_error);
         out.dissipated[0] = normal_dashpot_work;
         out.dissipated[1] = sliding.select(tangential_dashpot_work, zero);
         out.dissipated[2] = sliding.and(slip).select(zero + slip_work, zero);

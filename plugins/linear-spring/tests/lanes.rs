@@ -178,6 +178,9 @@ fn lanes_give_the_scalar_bits() {
         "lanes evaluated {evaluated}: slid {slid}, stuck {stuck}, onsets {onsets}, releases {releases}"
     );
     assert_eq!(evaluated, 3 * 3000);
-    assert!(slid > 100 && stuck > 100, "the path must both slide and stick");
+    assert!(
+        slid > 100 && stuck > 100,
+        "the path must both slide and stick"
+    );
     assert!(onsets >= 8 && releases > 100, "contacts must start and end");
 }
