@@ -101,7 +101,11 @@ mod tests {
                 let grown_size = 3 * size + HUGE_PAGE;
                 let grown = allocator.realloc(block, layout, grown_size);
                 assert!(!grown.is_null());
-                assert!((0..size).step_by(4093).all(|k| *grown.add(k) == (k % 251) as u8));
+                assert!(
+                    (0..size)
+                        .step_by(4093)
+                        .all(|k| *grown.add(k) == (k % 251) as u8)
+                );
                 *grown.add(grown_size - 1) = 7;
                 assert_eq!(*grown.add(grown_size - 1), 7);
                 allocator.dealloc(grown, Layout::from_size_align(grown_size, 64).unwrap());

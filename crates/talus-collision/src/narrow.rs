@@ -500,6 +500,12 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
     }
 }
 
+/// How many pairs ahead [`narrow_chunk`] asks for the partners' positions and radii.
+const PARTNERS_AHEAD: usize = 32;
+
+/// From how many grains [`narrow_chunk`] asks for partners ahead (fewer stay in cache).
+const PARTNERS_AHEAD_FROM_GRAINS: usize = 65_536;
+
 /// The narrow phase on one chunk of grains (first grain `base`): tests the candidate
 /// pairs that may be within reach (a prefix of the chunk's pairs, which come in
 /// increasing order of their gap at the build) four at a time, and each grain against
@@ -566,12 +572,25 @@ fn narrow_chunk(
             }
         }
     };
+    let ask_partners = s.len() >= PARTNERS_AHEAD_FROM_GRAINS;
     let (locals, partners) = (local.chunks_exact(4), partner.chunks_exact(4));
     let (local_rest, partner_rest) = (locals.remainder(), partners.remainder());
-    for (local, partner) in locals.zip(partners) {
+    for (q, (local, partner)) in locals.zip(partners).enumerate() {
         let local: [u8; 4] = local.try_into().expect("four pairs");
         let partner: [u32; 4] = partner.try_into().expect("four pairs");
         ahead.step(2);
+        // A chunk's pairs reach grains all over the packing; at large sizes those are
+        // not in cache: ask for the positions and radii of the pairs a few batches ahead.
+        if ask_partners {
+            for &j in candidates.partner[..tested]
+                .iter()
+                .skip(4 * q + PARTNERS_AHEAD)
+                .take(4)
+            {
+                talus_core::snapshot::prefetch_item(&s.position, j as usize);
+                talus_core::snapshot::prefetch_item(&s.radius, j as usize);
+            }
+        }
         test(local.map(|l| base + l as usize), partner, 0xF);
     }
     if !local_rest.is_empty() {
