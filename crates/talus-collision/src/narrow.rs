@@ -217,12 +217,6 @@ fn update_contacts_inner(
         || !idle.evaluated
         || idle.layout != s.layout;
     index.key_by(world, s, &mut orphans);
-    world.resource_mut::<IdleContacts>().pairs = {
-        // Keep the allocation for the next force pass.
-        let mut pairs = idle.pairs.clone();
-        pairs.clear();
-        pairs
-    };
     let n = s.len();
     let chunks = n.div_ceil(CHUNK);
     let gap_threshold = list.gap_threshold();
@@ -306,6 +300,10 @@ fn update_contacts_inner(
             }
         }
     }
+    // The list is read; its allocation goes back for the next force pass to fill.
+    let mut pairs = idle.pairs;
+    pairs.clear();
+    world.resource_mut::<IdleContacts>().pairs = pairs;
     // A new pair takes over a contact of its law that ended in this pass, when there is
     // one: its components are overwritten in place (`LawSlot::recycle`), which costs a
     // fraction of a despawn and a spawn (each moves a row of five columns and their change
@@ -503,9 +501,6 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
 /// How many pairs ahead [`narrow_chunk`] asks for the partners' positions and radii.
 const PARTNERS_AHEAD: usize = 32;
 
-/// From how many grains [`narrow_chunk`] asks for partners ahead (fewer stay in cache).
-const PARTNERS_AHEAD_FROM_GRAINS: usize = 65_536;
-
 /// The narrow phase on one chunk of grains (first grain `base`): tests the candidate
 /// pairs that may be within reach (a prefix of the chunk's pairs, which come in
 /// increasing order of their gap at the build) four at a time, and each grain against
@@ -572,26 +567,22 @@ fn narrow_chunk(
             }
         }
     };
-    let ask_partners = s.len() >= PARTNERS_AHEAD_FROM_GRAINS;
+    let ask_partners = s.len() >= talus_core::snapshot::PREFETCH_FROM_GRAINS;
     let (locals, partners) = (local.chunks_exact(4), partner.chunks_exact(4));
     let (local_rest, partner_rest) = (locals.remainder(), partners.remainder());
-    for (q, (local, partner)) in locals.zip(partners).enumerate() {
-        let local: [u8; 4] = local.try_into().expect("four pairs");
-        let partner: [u32; 4] = partner.try_into().expect("four pairs");
+    for (q, (four_local, four_partner)) in locals.zip(partners).enumerate() {
+        let four_local: [u8; 4] = four_local.try_into().expect("four pairs");
+        let four_partner: [u32; 4] = four_partner.try_into().expect("four pairs");
         ahead.step(2);
         // A chunk's pairs reach grains all over the packing; at large sizes those are
         // not in cache: ask for the positions and radii of the pairs a few batches ahead.
         if ask_partners {
-            for &j in candidates.partner[..tested]
-                .iter()
-                .skip(4 * q + PARTNERS_AHEAD)
-                .take(4)
-            {
+            for &j in partner.iter().skip(4 * q + PARTNERS_AHEAD).take(4) {
                 talus_core::snapshot::prefetch_item(&s.position, j as usize);
                 talus_core::snapshot::prefetch_item(&s.radius, j as usize);
             }
         }
-        test(local.map(|l| base + l as usize), partner, 0xF);
+        test(four_local.map(|l| base + l as usize), four_partner, 0xF);
     }
     if !local_rest.is_empty() {
         // The last pairs, with the first of them repeated in the lanes left over.

@@ -708,7 +708,7 @@ fn sum_range(
         }
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
-    let ask_ahead = len >= SUM_AHEAD_FROM_GRAINS;
+    let ask_ahead = len >= talus_core::snapshot::PREFETCH_FROM_GRAINS;
     if !pick {
         for &(bodies, forces) in tables {
             for (row, (b, f)) in bodies.iter().zip(forces).enumerate() {
@@ -763,10 +763,6 @@ fn sum_range(
 /// How many contacts (or picked sides) ahead [`sum_range`] asks for the totals it will add
 /// to.
 const SUM_AHEAD: usize = 16;
-
-/// From how many grains in its range [`sum_range`] asks for totals ahead: fewer grains'
-/// totals (48 bytes a grain) stay in a core's cache.
-const SUM_AHEAD_FROM_GRAINS: usize = 65_536;
 
 /// Contacts whose sides [`sum_range`] picks at a time.
 const PICK_BLOCK: usize = 2048;

@@ -191,24 +191,13 @@ impl GrainSnapshot {
     /// iterations ahead. Does nothing for an index out of range, and nothing off x86-64.
     #[inline(always)]
     pub fn prefetch(&self, i: usize) {
-        #[cfg(target_arch = "x86_64")]
         if i < self.position.len() {
-            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-            let lines = [
-                self.position[i..].as_ptr().cast::<i8>(),
-                self.velocity[i..].as_ptr().cast::<i8>(),
-                self.omega[i..].as_ptr().cast::<i8>(),
-                self.radius[i..].as_ptr().cast::<i8>(),
-                self.inverse_mass[i..].as_ptr().cast::<i8>(),
-            ];
-            for line in lines {
-                // SAFETY: a prefetch only hints the cache; the address is inside a live
-                // allocation and nothing is read or written through it.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(line) };
-            }
+            prefetch_address(self.position.as_ptr().wrapping_add(i));
+            prefetch_address(self.velocity.as_ptr().wrapping_add(i));
+            prefetch_address(self.omega.as_ptr().wrapping_add(i));
+            prefetch_address(self.radius.as_ptr().wrapping_add(i));
+            prefetch_address(self.inverse_mass.as_ptr().wrapping_add(i));
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = i;
     }
 
     /// The grain arrays the lane forms of the hot loops read, checked once to be of one
@@ -232,40 +221,47 @@ impl GrainSnapshot {
     }
 }
 
-/// Asks the processor to bring the cache line of `data[i]` into the cache, without
-/// waiting: for a loop that will read or update items in an order the hardware cannot
-/// guess. Does nothing for an index out of range, and nothing off x86-64.
+/// From how many grains a loop that reads grain arrays out of order asks for them ahead
+/// ([`prefetch_item`]): fewer grains' arrays stay in a core's cache, where the requests
+/// cost more than they save (docs/performance.md, session 14).
+pub const PREFETCH_FROM_GRAINS: usize = 65_536;
+
+/// Asks the processor to bring the cache line holding `address` into the cache, without
+/// waiting. A hint only: nothing is read or written, and no address faults. Does nothing
+/// off x86-64. Every prefetch of the hot loops goes through this.
 #[inline(always)]
-pub fn prefetch_item<T>(data: &[T], i: usize) {
+fn prefetch_address<T>(address: *const T) {
     #[cfg(target_arch = "x86_64")]
-    if let Some(item) = data.get(i) {
+    // SAFETY: a prefetch reads and writes nothing and does not fault, whatever the
+    // address; the intrinsic is unsafe only for its target feature, which x86-64 has.
+    unsafe {
         use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        // SAFETY: a prefetch only hints the cache; the address is that of a live item and
-        // nothing is read or written through it.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>((item as *const T).cast::<i8>()) };
+        _mm_prefetch::<_MM_HINT_T0>(address.cast::<i8>());
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (data, i);
+    let _ = address;
+}
+
+/// Asks the processor to bring the cache line of `data[i]` into the cache, without
+/// waiting: for a loop that will read or update items in an order the hardware cannot
+/// guess. Does nothing for an index out of range.
+#[inline(always)]
+pub fn prefetch_item<T>(data: &[T], i: usize) {
+    if let Some(item) = data.get(i) {
+        prefetch_address(item);
+    }
 }
 
 /// Asks the processor to bring the whole of `data` into the cache, line by line in
 /// order, without waiting: for a loop about to read a small array in an order the
 /// hardware cannot follow (which would otherwise wait for memory at each first touch of a
-/// line). Does nothing off x86-64.
+/// line).
 #[inline]
 pub fn prefetch_all<T>(data: &[T]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        let start = data.as_ptr().cast::<i8>();
-        for offset in (0..std::mem::size_of_val(data)).step_by(64) {
-            // SAFETY: a prefetch only hints the cache; the address is inside the slice and
-            // nothing is read or written through it.
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(start.add(offset)) };
-        }
+    let start = data.as_ptr().cast::<u8>();
+    for offset in (0..std::mem::size_of_val(data)).step_by(64) {
+        prefetch_address(start.wrapping_add(offset));
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = data;
 }
 
 /// Asks for a few slices' cache lines a few at a time, spread over a loop's iterations
@@ -309,15 +305,7 @@ impl LinePrefetcher {
                 self.offset = 0;
                 continue;
             }
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: a prefetch only hints the cache; the address lies inside a slice
-            // given to `add`, and nothing is read or written through it.
-            unsafe {
-                use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-                _mm_prefetch::<_MM_HINT_T0>(start.add(self.offset));
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            let _ = start;
+            prefetch_address(start.wrapping_add(self.offset));
             self.offset += 64;
         }
     }
