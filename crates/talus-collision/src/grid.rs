@@ -74,9 +74,9 @@ impl CellGrid {
         let n = s.len();
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for p in &s.position {
-            lo = lo.min(*p);
-            hi = hi.max(*p);
+        for g in &s.records {
+            lo = lo.min(g.position);
+            hi = hi.max(g.position);
         }
         if n == 0 || !lo.is_finite() || !hi.is_finite() {
             lo = DVec3::ZERO;
@@ -120,8 +120,8 @@ impl CellGrid {
         let cell = self.cell;
         let total = self.dims[0] * self.dims[1] * self.dims[2];
         self.cell_of.clear();
-        self.cell_of.extend(s.position.iter().map(|p| {
-            let q = (*p - lo) / cell;
+        self.cell_of.extend(s.records.iter().map(|g| {
+            let q = (g.position - lo) / cell;
             let c = [
                 (q.x as usize).min(self.dims[0] - 1),
                 (q.y as usize).min(self.dims[1] - 1),

@@ -255,9 +255,7 @@ fn update_contacts_inner(
             let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
             if !next.is_empty() {
                 ahead.add(&per_grain_view[next.clone()]);
-                ahead.add(&s.position[next.clone()]);
-                ahead.add(&s.radius[next.clone()]);
-                ahead.add(&s.inverse_mass[next]);
+                ahead.add(&s.records[next]);
             }
             narrow_chunk(
                 &pass_state,
@@ -484,7 +482,7 @@ struct PassState<'a> {
 /// at a time, with the same bits.
 #[inline]
 fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
-    let (p, r) = (s.position[key], s.radius[key]);
+    let (p, r) = (s.position(key), s.radius(key));
     match ContactBodies::wall_of(partner) {
         Some(w) => {
             let wall = &s.walls[w];
@@ -492,8 +490,8 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
         }
         None => {
             let j = partner as usize;
-            let reach = r + s.radius[j] + range;
-            s.separation(p, s.position[j]).length_squared() < reach * reach
+            let reach = r + s.radius(j) + range;
+            s.separation(p, s.position(j)).length_squared() < reach * reach
         }
     }
 }
@@ -526,11 +524,20 @@ fn narrow_chunk(
     // A contact between two frozen grains (zero inverse mass in the snapshot), or a
     // frozen grain and a wall, moves nothing, and its reduced mass (hence a mass-scaled
     // dashpot) would be infinite: none is made.
-    let frozen = |i: usize| s.inverse_mass[i] == 0.0;
-    let mut touch = |i: usize, partner: u32, material_b: u16| {
+    let frozen = |i: usize| s.inverse_mass(i) == 0.0;
+    // The partner's material is looked up only for a pair with no contact yet: most
+    // touching pairs have one, and the materials are an array of their own, which a
+    // large packing's partners would each miss in cache.
+    let mut touch = |i: usize, partner: u32| {
         let known = entries[i - base].iter().any(|e| e.partner == partner);
-        if !known && table.get(s.material[i], material_b).is_some() {
-            new.push((i as u32, partner));
+        if !known {
+            let material_b = match ContactBodies::wall_of(partner) {
+                Some(w) => s.walls[w].material,
+                None => s.material[partner as usize],
+            };
+            if table.get(s.material[i], material_b).is_some() {
+                new.push((i as u32, partner));
+            }
         }
     };
     // The pairs come in no order of their grains: bring the chunk's contact lists (12 KB)
@@ -563,7 +570,7 @@ fn narrow_chunk(
             within &= within - 1;
             let (i, j) = (i[l], j[l]);
             if !(frozen(i) && frozen(j as usize)) {
-                touch(i, j, s.material[j as usize]);
+                touch(i, j);
             }
         }
     };
@@ -578,8 +585,7 @@ fn narrow_chunk(
         // not in cache: ask for the positions and radii of the pairs a few batches ahead.
         if ask_partners {
             for &j in partner.iter().skip(4 * q + PARTNERS_AHEAD).take(4) {
-                talus_core::snapshot::prefetch_item(&s.position, j as usize);
-                talus_core::snapshot::prefetch_item(&s.radius, j as usize);
+                talus_core::snapshot::prefetch_item(&s.records, j as usize);
             }
         }
         test(four_local.map(|l| base + l as usize), four_partner, 0xF);
@@ -598,10 +604,10 @@ fn narrow_chunk(
             if frozen(i) {
                 continue;
             }
-            for (w, wall) in s.walls.iter().enumerate() {
+            for w in 0..s.walls.len() {
                 let code = ContactBodies::wall_code(w);
                 if touching(s, range, i, code) {
-                    touch(i, code, wall.material);
+                    touch(i, code);
                 }
             }
         }

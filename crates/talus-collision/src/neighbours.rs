@@ -158,13 +158,13 @@ impl NeighbourList {
         }
         // The largest move is a maximum, so the same on any number of threads.
         let largest_sq = s
-            .position
+            .records
             .par_chunks(4096)
             .zip(self.reference.par_chunks(4096))
-            .map(|(p, q)| {
-                p.iter()
+            .map(|(g, q)| {
+                g.iter()
                     .zip(q)
-                    .map(|(p, q)| s.separation(*p, *q).length_squared())
+                    .map(|(g, q)| s.separation(g.position, *q).length_squared())
                     .fold(0.0, f64::max)
             })
             .reduce(|| 0.0, f64::max);
@@ -238,7 +238,7 @@ pub fn update_neighbour_list(
             };
             let reader = s.reader();
             for i in base..(base + CHUNK).min(n) {
-                let p = s.position[i];
+                let p = s.position(i);
                 let c = grid.coords(p);
                 if let Some(b) = s.periodic()
                     && let Some(shear) = &b.shear
@@ -292,7 +292,7 @@ pub fn update_neighbour_list(
             out.fill(&mut keys, &mut scratch);
         });
     list.reference.clear();
-    list.reference.extend_from_slice(&s.position);
+    list.reference.extend(s.records.iter().map(|g| g.position));
     list.layout = s.layout;
     list.offset = s
         .periodic()
@@ -335,7 +335,7 @@ fn candidates_after(
     skin: f64,
     mut found: impl FnMut(u32, u16),
 ) {
-    let (p, r) = (V4::splat(s.position[i]), F4::splat(s.radius[i]));
+    let (p, r) = (V4::splat(s.position(i)), F4::splat(s.radius(i)));
     let (range4, skin4) = (F4::splat(range), F4::splat(skin));
     let mut test = |j: [u32; 4], live: u32| {
         let b = grains.gather4(j.map(|j| j as usize));
@@ -384,8 +384,8 @@ fn sheared_candidates(
 ) {
     let (g, f) = (shear.gradient, shear.flow);
     let third = 3 - g - f;
-    let p = s.position[i];
-    let r = s.radius[i];
+    let p = s.position(i);
+    let r = s.radius(i);
     let gs = grid.neighbour_cells(c, g);
     let ts = grid.neighbour_cells(c, third);
     for &cg in gs.cells() {
@@ -400,8 +400,8 @@ fn sheared_candidates(
                     if (j as usize) <= i {
                         continue;
                     }
-                    let reach = r + s.radius[j as usize] + range;
-                    let dist_sq = s.separation(p, s.position[j as usize]).length_squared();
+                    let reach = r + s.radius(j as usize) + range;
+                    let dist_sq = s.separation(p, s.position(j as usize)).length_squared();
                     if dist_sq < (reach + skin) * (reach + skin) {
                         out.push((j, gap_quanta(dist_sq, reach, skin)));
                     }

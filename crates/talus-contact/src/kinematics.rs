@@ -83,9 +83,9 @@ impl ContactKinematics {
     /// Kinematics of grains `i` (a) and `j` (b) of the snapshot.
     #[inline]
     pub fn grain_grain(s: &GrainSnapshot, i: usize, j: usize) -> Self {
-        let (ra, rb) = (s.radius[i], s.radius[j]);
+        let (ra, rb) = (s.radius(i), s.radius(j));
         // Across a Lees–Edwards seam b's nearest image moves faster than b itself.
-        let (d, image_velocity) = s.separation_and_image_velocity(s.position[i], s.position[j]);
+        let (d, image_velocity) = s.separation_and_image_velocity(s.position(i), s.position(j));
         let dist = d.length();
         let normal = if dist > 0.0 {
             d * (1.0 / dist)
@@ -95,12 +95,12 @@ impl ContactKinematics {
         let overlap = ra + rb - dist;
         let branch_a = -normal * (ra - 0.5 * overlap);
         let branch_b = normal * (rb - 0.5 * overlap);
-        let point = s.position[j] + branch_b;
+        let point = s.position(j) + branch_b;
         let (wa, wb) = (s.omega[i], s.omega[j]);
-        let relative_velocity = (s.velocity[i] + wa.cross(branch_a))
-            - (s.velocity[j] + image_velocity + wb.cross(branch_b));
+        let relative_velocity = (s.velocity(i) + wa.cross(branch_a))
+            - (s.velocity(j) + image_velocity + wb.cross(branch_b));
         let normal_velocity = relative_velocity.dot(normal);
-        let (inverse_ma, inverse_mb) = (s.inverse_mass[i], s.inverse_mass[j]);
+        let (inverse_ma, inverse_mb) = (s.inverse_mass(i), s.inverse_mass(j));
         Self {
             normal,
             overlap,
@@ -124,14 +124,14 @@ impl ContactKinematics {
     /// Kinematics of grain `i` (a) against a wall (b).
     #[inline]
     pub fn grain_wall(s: &GrainSnapshot, i: usize, wall: &WallState) -> Self {
-        let ra = s.radius[i];
+        let ra = s.radius(i);
         let normal = wall.normal;
-        let distance = (s.position[i] - wall.point).dot(normal);
+        let distance = (s.position(i) - wall.point).dot(normal);
         let overlap = ra - distance;
         let branch_a = -normal * (ra - 0.5 * overlap);
-        let point = s.position[i] + branch_a;
+        let point = s.position(i) + branch_a;
         let wa = s.omega[i];
-        let relative_velocity = s.velocity[i] + wa.cross(branch_a) - wall.velocity;
+        let relative_velocity = s.velocity(i) + wa.cross(branch_a) - wall.velocity;
         let normal_velocity = relative_velocity.dot(normal);
         Self {
             normal,
@@ -146,7 +146,7 @@ impl ContactKinematics {
             previous_overlap: 0.0,
             previous_normal: DVec3::ZERO,
             relative_omega: wa,
-            effective_mass: 1.0 / s.inverse_mass[i],
+            effective_mass: 1.0 / s.inverse_mass(i),
             effective_radius: ra,
             min_radius: ra,
         }

@@ -30,36 +30,49 @@ pub struct WallState {
     pub material: u16,
 }
 
+/// The state of one grain that the hot loops read together: position, radius, velocity
+/// and inverse mass in 64 bytes, one cache line (the array is aligned to lines). A loop
+/// that reaches a grain out of order (a contact's partner, a candidate pair's) then waits
+/// for one line, not for one line or two in each of four arrays.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(64))]
+pub struct GrainRecord {
+    /// Centre position.
+    pub position: DVec3,
+    /// Radius.
+    pub radius: f64,
+    /// Velocity (the half-step velocity under velocity Verlet).
+    pub velocity: DVec3,
+    /// Inverse mass 1/m (0 for a frozen grain).
+    pub inverse_mass: f64,
+}
+
 /// The snapshot's grain arrays, all of one length ([`GrainSnapshot::reader`]).
 #[derive(Clone, Copy, Debug)]
 pub struct GrainReader<'a> {
-    position: &'a [DVec3],
-    velocity: &'a [DVec3],
+    records: &'a [GrainRecord],
     omega: &'a [DVec3],
-    radius: &'a [f64],
-    inverse_mass: &'a [f64],
 }
 
 impl GrainReader<'_> {
     /// The state of four grains (dense indices `i`), one per lane. Panics if an index is
-    /// out of range (one test for the four, not one at each of their sixteen reads).
+    /// out of range (one test for the four, not one at each of their reads).
     #[inline(always)]
     pub fn gather4(&self, i: [usize; 4]) -> GrainLanes {
-        let n = self.position.len();
+        let n = self.records.len();
         assert!(
             i[0].max(i[1]).max(i[2].max(i[3])) < n,
             "grain index out of the snapshot"
         );
-        // SAFETY: every index is below `n`, the length of each array read (`reader` cut
-        // them all to it).
-        let at = |values: &[DVec3]| V4::from_fn(|k| unsafe { *values.get_unchecked(i[k]) });
-        let scalar = |values: &[f64]| F4::from_fn(|k| unsafe { *values.get_unchecked(i[k]) });
+        // SAFETY: every index is below `n`, the length of both arrays read (`reader` cut
+        // them to it).
+        let record = |k: usize| unsafe { self.records.get_unchecked(i[k]) };
         GrainLanes {
-            position: at(self.position),
-            velocity: at(self.velocity),
-            omega: at(self.omega),
-            radius: scalar(self.radius),
-            inverse_mass: scalar(self.inverse_mass),
+            position: V4::from_fn(|k| record(k).position),
+            velocity: V4::from_fn(|k| record(k).velocity),
+            omega: V4::from_fn(|k| unsafe { *self.omega.get_unchecked(i[k]) }),
+            radius: F4::from_fn(|k| record(k).radius),
+            inverse_mass: F4::from_fn(|k| record(k).inverse_mass),
         }
     }
 }
@@ -84,17 +97,12 @@ pub struct GrainLanes {
 pub struct GrainSnapshot {
     /// Grain entities, in dense order.
     pub entity: Vec<Entity>,
-    /// Centre positions.
-    pub position: Vec<DVec3>,
-    /// Velocities (half-step velocities under velocity Verlet).
-    pub velocity: Vec<DVec3>,
+    /// Positions, radii, velocities (half-step velocities under velocity Verlet) and
+    /// inverse masses 1/m (0 for a frozen grain: the reduced mass of a pair is
+    /// 1/(1/m_a + 1/m_b), one division instead of three), one cache line per grain.
+    pub records: Vec<GrainRecord>,
     /// Angular velocities.
     pub omega: Vec<DVec3>,
-    /// Radii.
-    pub radius: Vec<f64>,
-    /// Inverse masses 1/m (0 for a frozen grain): the reduced mass of a pair is
-    /// 1/(1/m_a + 1/m_b), one division instead of three.
-    pub inverse_mass: Vec<f64>,
     /// Material ids.
     pub material: Vec<u16>,
     /// Dense index of each grain, indexed by `Entity::index_u32()`; [`NO_INDEX`] elsewhere.
@@ -124,6 +132,30 @@ impl GrainSnapshot {
     /// Whether there are no grains.
     pub fn is_empty(&self) -> bool {
         self.entity.is_empty()
+    }
+
+    /// Centre position of grain `i` (dense index).
+    #[inline(always)]
+    pub fn position(&self, i: usize) -> DVec3 {
+        self.records[i].position
+    }
+
+    /// Radius of grain `i`.
+    #[inline(always)]
+    pub fn radius(&self, i: usize) -> f64 {
+        self.records[i].radius
+    }
+
+    /// Velocity of grain `i`.
+    #[inline(always)]
+    pub fn velocity(&self, i: usize) -> DVec3 {
+        self.records[i].velocity
+    }
+
+    /// Inverse mass of grain `i` (0 for a frozen grain).
+    #[inline(always)]
+    pub fn inverse_mass(&self, i: usize) -> f64 {
+        self.records[i].inverse_mass
     }
 
     /// Dense index of a grain entity, if it is in the snapshot.
@@ -185,18 +217,15 @@ impl GrainSnapshot {
         }
     }
 
-    /// Asks the processor to bring grain `i`'s state (position, velocity, spin, radius,
-    /// inverse mass) into the cache, without waiting for it: a loop that will read grains
-    /// in an order the hardware cannot guess (a contact's partners) calls this a few
-    /// iterations ahead. Does nothing for an index out of range, and nothing off x86-64.
+    /// Asks the processor to bring grain `i`'s state (its record and its spin) into the
+    /// cache, without waiting for it: a loop that will read grains in an order the
+    /// hardware cannot guess (a contact's partners) calls this a few iterations ahead.
+    /// Does nothing for an index out of range, and nothing off x86-64.
     #[inline(always)]
     pub fn prefetch(&self, i: usize) {
-        if i < self.position.len() {
-            prefetch_address(self.position.as_ptr().wrapping_add(i));
-            prefetch_address(self.velocity.as_ptr().wrapping_add(i));
+        if i < self.records.len() {
+            prefetch_address(self.records.as_ptr().wrapping_add(i));
             prefetch_address(self.omega.as_ptr().wrapping_add(i));
-            prefetch_address(self.radius.as_ptr().wrapping_add(i));
-            prefetch_address(self.inverse_mass.as_ptr().wrapping_add(i));
         }
     }
 
@@ -205,13 +234,10 @@ impl GrainSnapshot {
     /// ([`GrainReader::gather4`]).
     #[inline(always)]
     pub fn reader(&self) -> GrainReader<'_> {
-        let n = self.position.len();
+        let n = self.records.len();
         GrainReader {
-            position: &self.position[..n],
-            velocity: &self.velocity[..n],
+            records: &self.records[..n],
             omega: &self.omega[..n],
-            radius: &self.radius[..n],
-            inverse_mass: &self.inverse_mass[..n],
         }
     }
 
@@ -361,15 +387,13 @@ pub fn gather_snapshot(
         .sum();
     let mut reordered = s.entity.len() != n;
     s.entity.resize(n, Entity::PLACEHOLDER);
-    s.position.resize(n, DVec3::ZERO);
-    s.velocity.resize(n, DVec3::ZERO);
+    s.records.resize(n, GrainRecord::default());
     s.omega.resize(n, DVec3::ZERO);
-    s.radius.resize(n, 0.0);
-    s.inverse_mass.resize(n, 0.0);
     s.material.resize(n, 0);
     // Each table's slice of every array is filled in parallel (plain copies: the result
     // does not depend on the thread count).
     let mut k = 0;
+    s.max_radius = 0.0;
     for (e, p, v, w, r, m, mat) in grains.contiguous_iter().expect("grain query is dense") {
         let range = k..k + e.len();
         k += e.len();
@@ -377,41 +401,48 @@ pub fn gather_snapshot(
             reordered = true;
         }
         s.entity[range.clone()].copy_from_slice(e);
-        let (position, velocity, omega) = (
-            &mut s.position[range.clone()],
-            &mut s.velocity[range.clone()],
+        let (records, omega, material) = (
+            &mut s.records[range.clone()],
             &mut s.omega[range.clone()],
-        );
-        let (radius, inverse_mass, material) = (
-            &mut s.radius[range.clone()],
-            &mut s.inverse_mass[range.clone()],
             &mut s.material[range],
         );
-        rayon::join(
+        let (table_max_radius, ()) = rayon::join(
             || {
-                rayon::join(
-                    || copy_column(position, p, |x| x.0),
-                    || copy_column(velocity, v, |x| x.0),
-                )
+                // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
+                // copy. The largest radius is taken in the same pass (a second pass would
+                // read every record again for one number).
+                records
+                    .par_chunks_mut(COPY_CHUNK)
+                    .enumerate()
+                    .map(|(c, records)| {
+                        let from = c * COPY_CHUNK;
+                        let to = from + records.len();
+                        let sources = p[from..to]
+                            .iter()
+                            .zip(&r[from..to])
+                            .zip(v[from..to].iter().zip(&m[from..to]));
+                        for (record, ((p, r), (v, m))) in records.iter_mut().zip(sources) {
+                            *record = GrainRecord {
+                                position: p.0,
+                                radius: r.0,
+                                velocity: v.0,
+                                inverse_mass: 1.0 / m.0,
+                            };
+                        }
+                        r[from..to]
+                            .iter()
+                            .fold(0.0, |largest, r| f64::max(largest, r.0))
+                    })
+                    // A maximum: the same on any number of threads.
+                    .reduce(|| 0.0, f64::max)
             },
             || {
-                rayon::join(
-                    || copy_column(omega, w, |x| x.0),
-                    || {
-                        copy_column(radius, r, |x| x.0);
-                        copy_column(inverse_mass, m, |x| 1.0 / x.0);
-                        copy_column(material, mat, |x| x.0);
-                    },
-                )
+                copy_column(omega, w, |x| x.0);
+                copy_column(material, mat, |x| x.0);
             },
         );
+        s.max_radius = s.max_radius.max(table_max_radius);
     }
-    // A maximum: the same on any number of threads.
-    s.max_radius = s
-        .radius
-        .par_chunks(COPY_CHUNK)
-        .map(|r| r.iter().copied().fold(0.0, f64::max))
-        .reduce(|| 0.0, f64::max);
     if reordered {
         let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
         s.dense_of.clear();
@@ -424,7 +455,7 @@ pub fn gather_snapshot(
     // mass is then the moving grain's own (as LAMMPS does for frozen atoms).
     for e in &frozen {
         if let Some(i) = s.dense(e) {
-            s.inverse_mass[i] = 0.0;
+            s.records[i].inverse_mass = 0.0;
         }
     }
     let walls_changed = s.walls.len() != walls.iter().len()

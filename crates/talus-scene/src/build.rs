@@ -2049,7 +2049,13 @@ fn for_each_close_pair<E>(
     // The grid's cells are 2 R_max wide: R_max = reach / 2 makes them `reach` wide.
     let mut s = GrainSnapshot::default();
     s.entity = vec![Entity::PLACEHOLDER; points.len()];
-    s.position = points.to_vec();
+    s.records = points
+        .iter()
+        .map(|&position| talus_core::snapshot::GrainRecord {
+            position,
+            ..Default::default()
+        })
+        .collect();
     s.max_radius = 0.5 * reach;
     s.set_periodic(periodic.copied());
     let mut grid = CellGrid::default();

@@ -412,14 +412,14 @@ pub fn sample_fields(
             let Some(i) = snapshot.dense(c.a) else {
                 continue;
             };
-            let xa = snapshot.position[i];
+            let xa = snapshot.position(i);
             let far = match c.kind {
                 ContactKind::GrainGrain => {
                     let Some(j) = snapshot.dense(c.b) else {
                         continue;
                     };
                     // The image of b nearest to a, as in the Love–Weber sum.
-                    xa - snapshot.separation(xa, snapshot.position[j])
+                    xa - snapshot.separation(xa, snapshot.position(j))
                 }
                 // A wall has no centre: the branch ends at the contact point.
                 ContactKind::GrainWall => g.point,

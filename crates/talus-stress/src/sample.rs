@@ -338,8 +338,8 @@ pub fn sample_stress(
             continue;
         };
         let active = f.is_active(g);
-        let xa = snapshot.position[i];
-        let ra = snapshot.radius[i];
+        let xa = snapshot.position(i);
+        let ra = snapshot.radius(i);
         let point = g.point;
         // The branch vectors exactly as the kinematics computed them, so that the
         // moment beyond branch × force is exactly zero for a law that adds none.
@@ -350,11 +350,11 @@ pub fn sample_stress(
                 let Some(j) = snapshot.dense(c.b) else {
                     continue;
                 };
-                let branch_b = g.normal * (snapshot.radius[j] - 0.5 * g.overlap);
+                let branch_b = g.normal * (snapshot.radius(j) - 0.5 * g.overlap);
                 // The image of b nearest to a: across a periodic seam the branch is
                 // the short way round.
                 (
-                    xa - snapshot.separation(xa, snapshot.position[j]),
+                    xa - snapshot.separation(xa, snapshot.position(j)),
                     f.torque_b - branch_b.cross(-f.force),
                 )
             }
