@@ -438,11 +438,7 @@ fn fields_are_computed_only_when_the_scene_asks() {
     ));
     assert_eq!(
         sample_stage(&only),
-        [
-            "kinetic_energy",
-            "health_check",
-            talus_stress::FIELD_SYSTEM_NAME
-        ]
+        ["health_check", talus_stress::FIELD_SYSTEM_NAME]
     );
     assert!(
         only.notes
@@ -455,7 +451,6 @@ fn fields_are_computed_only_when_the_scene_asks() {
     assert_eq!(
         sample_stage(&both),
         [
-            "kinetic_energy",
             "health_check",
             talus_stress::SYSTEM_NAME,
             talus_stress::FIELD_SYSTEM_NAME

@@ -760,7 +760,7 @@ fn stress_system_is_scheduled_only_when_the_scene_asks() {
     let with = plan_of(&gas_scene("sampling: (),"));
     assert_eq!(
         sample_stage(&with),
-        ["kinetic_energy", "health_check", talus_stress::SYSTEM_NAME]
+        ["health_check", talus_stress::SYSTEM_NAME]
     );
     assert!(with.plugins.iter().any(|p| p == "stress_sampling"));
     assert!(

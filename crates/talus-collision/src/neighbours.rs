@@ -9,7 +9,6 @@
 //! step are a prefix of the list.
 
 use bevy_ecs::prelude::*;
-use glam::DVec3;
 use rayon::prelude::*;
 use talus_core::lanes::{F4, V4};
 use talus_core::periodic::{ImageLanes, LeesEdwards, NearestImage, PeriodicBox};
@@ -112,8 +111,6 @@ pub struct NeighbourList {
     pub skin: f64,
     /// Candidate partners, per chunk of [`CHUNK`] grains.
     pub chunks: Vec<CandidateChunk>,
-    /// Grain positions at the last build.
-    reference: Vec<DVec3>,
     /// The snapshot layout ([`GrainSnapshot::layout`]) of the last build (0: none).
     layout: u32,
     /// Number of builds so far.
@@ -156,18 +153,9 @@ impl NeighbourList {
         if half <= 0.0 {
             return true;
         }
-        // The largest move is a maximum, so the same on any number of threads.
-        let largest_sq = s
-            .records
-            .par_chunks(4096)
-            .zip(self.reference.par_chunks(4096))
-            .map(|(g, q)| {
-                g.iter()
-                    .zip(q)
-                    .map(|(g, q)| s.separation(g.position, *q).length_squared())
-                    .fold(0.0, f64::max)
-            })
-            .reduce(|| 0.0, f64::max);
+        // Found while the snapshot was gathered (against the positions marked at the
+        // last build); infinite when the grains changed since.
+        let largest_sq = s.largest_move_sq();
         if largest_sq > half * half {
             return true;
         }
@@ -201,7 +189,7 @@ fn gap_quanta(dist_sq: f64, reach: f64, skin: f64) -> u16 {
 
 /// Broad phase: rebuilds the cell grid and the candidate pairs when the list is stale.
 pub fn update_neighbour_list(
-    snapshot: Res<GrainSnapshot>,
+    mut snapshot: ResMut<GrainSnapshot>,
     mut grid: ResMut<CellGrid>,
     mut list: ResMut<NeighbourList>,
 ) {
@@ -291,8 +279,6 @@ pub fn update_neighbour_list(
             }
             out.fill(&mut keys, &mut scratch);
         });
-    list.reference.clear();
-    list.reference.extend(s.records.iter().map(|g| g.position));
     list.layout = s.layout;
     list.offset = s
         .periodic()
@@ -300,6 +286,7 @@ pub fn update_neighbour_list(
         .map_or(0.0, |shear| shear.offset);
     list.builds += 1;
     list.closing = 0.0;
+    snapshot.bypass_change_detection().mark_move_reference();
 }
 
 /// The runs of consecutive cells among a stencil's cells along one axis (sorted, or

@@ -91,3 +91,19 @@ pub struct EnergySnapshot {
     #[serde(skip)]
     pub worst_overlap_pair: Option<(Entity, Entity)>,
 }
+
+impl EnergySnapshot {
+    /// Sets the kinetic energies from per-chunk sums [Σ½mv², Σ½Iω², staggering], added in
+    /// the chunks' order (the same total on any number of threads).
+    pub fn store_kinetic(&mut self, chunk_sums: &[[f64; 3]]) {
+        let [mut translational, mut rotational, mut staggering] = [0.0; 3];
+        for [t, r, s] in chunk_sums {
+            translational += t;
+            rotational += r;
+            staggering += s;
+        }
+        self.translational_kinetic = translational;
+        self.rotational_kinetic = rotational;
+        self.kinetic_staggering = staggering;
+    }
+}

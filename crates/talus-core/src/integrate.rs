@@ -89,19 +89,6 @@ pub fn first_kick_rotation(
     rotation_kick(kick, grains);
 }
 
-/// Second rotational kick: ω += (1 − a)·dt·T/I.
-pub fn second_kick_rotation(
-    config: Res<SimConfig>,
-    clock: Res<Clock>,
-    grains: Query<
-        (&mut AngularVelocity, &Torque, &MomentOfInertia),
-        (With<Grain>, Without<Frozen>),
-    >,
-) {
-    let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
-    rotation_kick(kick, grains);
-}
-
 fn rotation_kick(
     kick: f64,
     mut grains: Query<
@@ -127,32 +114,6 @@ fn rotation_kick(
                 .for_each(|(w, (t, i))| w.iter_mut().zip(t.iter().zip(i)).for_each(update));
         } else {
             w.iter_mut().zip(t.iter().zip(i.iter())).for_each(update);
-        }
-    }
-}
-
-/// Second kick: v += (1 − a)·dt·F/m with the forces of the new positions.
-pub fn second_kick_translation(
-    config: Res<SimConfig>,
-    clock: Res<Clock>,
-    mut grains: Query<(&mut Velocity, &Force, &Mass), (With<Grain>, Without<Frozen>)>,
-) {
-    let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
-    if kick == 0.0 {
-        return;
-    }
-    for (mut v, f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
-        let v = v.bypass_change_detection();
-        let update = |(v, (f, m)): (&mut Velocity, (&Force, &Mass))| v.0 += f.0 * (kick / m.0);
-        if v.len() >= PARALLEL_THRESHOLD {
-            v.par_chunks_mut(PARALLEL_THRESHOLD)
-                .zip(
-                    f.par_chunks(PARALLEL_THRESHOLD)
-                        .zip(m.par_chunks(PARALLEL_THRESHOLD)),
-                )
-                .for_each(|(v, (f, m))| v.iter_mut().zip(f.iter().zip(m)).for_each(update));
-        } else {
-            v.iter_mut().zip(f.iter().zip(m.iter())).for_each(update);
         }
     }
 }
@@ -233,6 +194,10 @@ pub fn move_walls(clock: Res<Clock>, mut walls: Query<&mut Wall>) {
 /// from v₋ (before) to v₊ = v₋ + dt F/m (after). The trapezoidal work of the forces
 /// equals the change of ½ m v₋·v₊ step by step, so that is the kinetic energy the
 /// balance uses; it differs from ½ m v² by an O(dt²) term that vanishes with the force.
+///
+/// Scheduled on its own in [`Stage::Sample`](crate::schedule::Stage::Sample) for the Gear
+/// integrator; the leapfrogs sum the same terms while they kick
+/// ([`second_kick_and_kinetic_energy`]).
 pub fn kinetic_energy(
     config: Res<SimConfig>,
     mut energy: ResMut<EnergySnapshot>,
@@ -248,72 +213,11 @@ pub fn kinetic_energy(
         (With<Grain>, Without<Frozen>),
     >,
 ) {
-    // The configured step, also in the priming pass (whose own step is 0): the
-    // staggering belongs to the scheme the run will use, so the first sample already
-    // carries it and the balance does not jump at step 1.
-    let dt = config.dt;
-    // Stored velocity v = v₋ + (1 − a) dt F/m, so v₋ = v − (1 − a) dt F/m and
-    // v₊ = v + a dt F/m: ½ m v₋·v₊ − ½ m v² = ½ dt (2a − 1) v·F − ½ a (1 − a) dt² |F|²/m.
-    let a = config.integrator.kick_before_drift();
-    // Gear is not a leapfrog: no staggering term (its energy error shows in the balance).
-    let leapfrog = config.integrator != crate::resources::Integrator::Gear;
-    let linear = if leapfrog {
-        0.5 * dt * (2.0 * a - 1.0)
-    } else {
-        0.0
-    };
-    let quadratic = if leapfrog {
-        0.5 * a * (1.0 - a) * dt * dt
-    } else {
-        0.0
-    };
-    // Without rotation the torques are computed but never integrated.
-    let rotation = config.rotation;
+    let terms = KineticTerms::new(&config);
     // Summed per fixed chunk of grains, the chunks in order: the same sums on any number
     // of threads.
     let mut partial: Vec<[f64; 3]> = Vec::new();
     for (v, w, m, i, f, t) in grains.contiguous_iter().expect("grain query is dense") {
-        // Four grains at a time, each lane summing every fourth grain of the chunk; the
-        // lanes are added in a fixed order at the end of the chunk.
-        #[allow(clippy::type_complexity)]
-        let sums = |((v, w), (m, i)): (
-            (&[Velocity], &[AngularVelocity]),
-            (&[Mass], &[MomentOfInertia]),
-        ),
-                    (f, t): (&[Force], &[Torque])| {
-            let (half, linear, quadratic) =
-                (F4::splat(0.5), F4::splat(linear), F4::splat(quadratic));
-            let mut sums = [F4::zero(); 3];
-            let mut add = |g: [Grain4; 1]| {
-                let [g] = g;
-                sums[0] = sums[0] + half * g.m * g.v.length_squared();
-                sums[1] = sums[1] + half * g.i * g.w.length_squared();
-                sums[2] =
-                    sums[2] + (linear * g.v.dot(g.f) - quadratic * g.f.length_squared() / g.m);
-                if rotation {
-                    sums[2] =
-                        sums[2] + (linear * g.w.dot(g.t) - quadratic * g.t.length_squared() / g.i);
-                }
-            };
-            let n = v.len();
-            let (w, m, i, f, t) = (&w[..n], &m[..n], &i[..n], &f[..n], &t[..n]);
-            let full = n / 4 * 4;
-            for (((v, w), (m, i)), (f, t)) in v[..full]
-                .chunks_exact(4)
-                .zip(w[..full].chunks_exact(4))
-                .zip(m[..full].chunks_exact(4).zip(i[..full].chunks_exact(4)))
-                .zip(f[..full].chunks_exact(4).zip(t[..full].chunks_exact(4)))
-            {
-                add([Grain4::load(0, 4, v, w, m, i, f, t)]);
-            }
-            if full < n {
-                add([Grain4::load(full, n - full, v, w, m, i, f, t)]);
-            }
-            sums.map(|lanes| {
-                let [a, b, c, d] = lanes.to_array();
-                (a + b) + (c + d)
-            })
-        };
         partial.par_extend(
             v.par_chunks(REDUCTION_CHUNK)
                 .zip(w.par_chunks(REDUCTION_CHUNK))
@@ -325,18 +229,176 @@ pub fn kinetic_energy(
                     f.par_chunks(REDUCTION_CHUNK)
                         .zip(t.par_chunks(REDUCTION_CHUNK)),
                 )
-                .map(|(bodies, loads)| sums(bodies, loads)),
+                .map(|(((v, w), (m, i)), (f, t))| terms.chunk_sums(v, w, m, i, f, t)),
         );
     }
-    let [mut translational, mut rotational, mut staggering] = [0.0; 3];
-    for [t, r, s] in partial {
-        translational += t;
-        rotational += r;
-        staggering += s;
+    energy.store_kinetic(&partial);
+}
+
+/// Second kick of translation (and of rotation when it is integrated), v += (1 − a)·dt·F/m
+/// and ω += (1 − a)·dt·T/I, followed in the same pass by the kinetic-energy sums of
+/// [`kinetic_energy`] over the kicked state: one read of the velocities, spins, forces,
+/// torques, masses and inertias instead of two. Each chunk is kicked whole before it is
+/// summed, with the same operations in the same order as the two separate passes, so the
+/// state and the sums are the same to the bit.
+#[allow(clippy::type_complexity)]
+pub fn second_kick_and_kinetic_energy(
+    config: Res<SimConfig>,
+    clock: Res<Clock>,
+    mut energy: ResMut<EnergySnapshot>,
+    mut grains: Query<
+        (
+            &mut Velocity,
+            &mut AngularVelocity,
+            &Mass,
+            &MomentOfInertia,
+            &Force,
+            &Torque,
+        ),
+        (With<Grain>, Without<Frozen>),
+    >,
+) {
+    let terms = KineticTerms::new(&config);
+    // Zero in the priming pass: nothing moves, the energies are still sampled.
+    let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
+    let rotation = config.rotation;
+    let mut partial: Vec<[f64; 3]> = Vec::new();
+    for (mut v, mut w, m, i, f, t) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        let (v, w) = (v.bypass_change_detection(), w.bypass_change_detection());
+        partial.par_extend(
+            v.par_chunks_mut(REDUCTION_CHUNK)
+                .zip(w.par_chunks_mut(REDUCTION_CHUNK))
+                .zip(
+                    m.par_chunks(REDUCTION_CHUNK)
+                        .zip(i.par_chunks(REDUCTION_CHUNK)),
+                )
+                .zip(
+                    f.par_chunks(REDUCTION_CHUNK)
+                        .zip(t.par_chunks(REDUCTION_CHUNK)),
+                )
+                .map(|(((v, w), (m, i)), (f, t))| {
+                    // The chunk (48 KiB of velocities and spins) is still in cache when
+                    // it is summed.
+                    if kick != 0.0 {
+                        for (v, (f, m)) in v.iter_mut().zip(f.iter().zip(m)) {
+                            v.0 += f.0 * (kick / m.0);
+                        }
+                        if rotation {
+                            for (w, (t, i)) in w.iter_mut().zip(t.iter().zip(i)) {
+                                w.0 += t.0 * (kick / i.0);
+                            }
+                        }
+                    }
+                    terms.chunk_sums(v, w, m, i, f, t)
+                }),
+        );
     }
-    energy.translational_kinetic = translational;
-    energy.rotational_kinetic = rotational;
-    energy.kinetic_staggering = staggering;
+    energy.store_kinetic(&partial);
+}
+
+/// The coefficients of the kinetic-energy sums for the run's integrator.
+#[derive(Clone, Copy)]
+struct KineticTerms {
+    /// Coefficient of v·F (and ω·T) in the staggering term.
+    linear: f64,
+    /// Coefficient of |F|²/m (and |T|²/I) in the staggering term.
+    quadratic: f64,
+    /// Whether torques kick spins (without rotation they are computed but never used).
+    rotation: bool,
+}
+
+impl KineticTerms {
+    fn new(config: &SimConfig) -> Self {
+        // The configured step, also in the priming pass (whose own step is 0): the
+        // staggering belongs to the scheme the run will use, so the first sample already
+        // carries it and the balance does not jump at step 1.
+        let dt = config.dt;
+        // Stored velocity v = v₋ + (1 − a) dt F/m, so v₋ = v − (1 − a) dt F/m and
+        // v₊ = v + a dt F/m: ½ m v₋·v₊ − ½ m v² = ½ dt (2a − 1) v·F − ½ a (1 − a) dt² |F|²/m.
+        let a = config.integrator.kick_before_drift();
+        // Gear is not a leapfrog: no staggering term (its energy error shows in the balance).
+        let leapfrog = config.integrator != crate::resources::Integrator::Gear;
+        Self {
+            linear: if leapfrog {
+                0.5 * dt * (2.0 * a - 1.0)
+            } else {
+                0.0
+            },
+            quadratic: if leapfrog {
+                0.5 * a * (1.0 - a) * dt * dt
+            } else {
+                0.0
+            },
+            rotation: config.rotation,
+        }
+    }
+
+    /// Σ½mv², Σ½Iω² and the staggering term over one chunk of grains. Four grains at a
+    /// time, each lane summing every fourth grain of the chunk; the lanes are added in a
+    /// fixed order at the end of the chunk.
+    #[inline]
+    fn chunk_sums(
+        self,
+        v: &[Velocity],
+        w: &[AngularVelocity],
+        m: &[Mass],
+        i: &[MomentOfInertia],
+        f: &[Force],
+        t: &[Torque],
+    ) -> [f64; 3] {
+        let mut sums = Sums4::default();
+        let n = v.len();
+        let (w, m, i, f, t) = (&w[..n], &m[..n], &i[..n], &f[..n], &t[..n]);
+        let full = n / 4 * 4;
+        for (((v, w), (m, i)), (f, t)) in v[..full]
+            .chunks_exact(4)
+            .zip(w[..full].chunks_exact(4))
+            .zip(m[..full].chunks_exact(4).zip(i[..full].chunks_exact(4)))
+            .zip(f[..full].chunks_exact(4).zip(t[..full].chunks_exact(4)))
+        {
+            sums.add(self, Grain4::load(0, 4, v, w, m, i, f, t));
+        }
+        if full < n {
+            sums.add(self, Grain4::load(full, n - full, v, w, m, i, f, t));
+        }
+        sums.total()
+    }
+}
+
+/// Lane sums of Σ½mv², Σ½Iω² and the staggering term.
+struct Sums4([F4; 3]);
+
+impl Default for Sums4 {
+    fn default() -> Self {
+        Self([F4::zero(); 3])
+    }
+}
+
+impl Sums4 {
+    /// Adds four grains' terms, one per lane.
+    #[inline(always)]
+    fn add(&mut self, terms: KineticTerms, g: Grain4) {
+        let (half, linear, quadratic) = (
+            F4::splat(0.5),
+            F4::splat(terms.linear),
+            F4::splat(terms.quadratic),
+        );
+        let sums = &mut self.0;
+        sums[0] = sums[0] + half * g.m * g.v.length_squared();
+        sums[1] = sums[1] + half * g.i * g.w.length_squared();
+        sums[2] = sums[2] + (linear * g.v.dot(g.f) - quadratic * g.f.length_squared() / g.m);
+        if terms.rotation {
+            sums[2] = sums[2] + (linear * g.w.dot(g.t) - quadratic * g.t.length_squared() / g.i);
+        }
+    }
+
+    /// The lanes added in a fixed order.
+    fn total(&self) -> [f64; 3] {
+        self.0.map(|lanes| {
+            let [a, b, c, d] = lanes.to_array();
+            (a + b) + (c + d)
+        })
+    }
 }
 
 /// Four grains' state for the kinetic-energy sums, one per lane.

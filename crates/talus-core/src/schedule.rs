@@ -199,21 +199,21 @@ impl SimBuilder {
                 "gear_correct",
                 crate::gear::gear_correct,
             );
+            builder.add_system(Stage::Sample, "kinetic_energy", integrate::kinetic_energy);
         } else {
+            // The second kick and the kinetic energies in one pass over the grains (the
+            // name says what it kicks: rotation only when it is integrated).
+            let name = if rotation {
+                "kick_translation_rotation_kinetic_energy"
+            } else {
+                "kick_translation_kinetic_energy"
+            };
             builder.add_system(
                 Stage::IntegrateVelocities,
-                "kick_translation",
-                integrate::second_kick_translation,
+                name,
+                integrate::second_kick_and_kinetic_energy,
             );
-            if rotation {
-                builder.add_system(
-                    Stage::IntegrateVelocities,
-                    "kick_rotation",
-                    integrate::second_kick_rotation,
-                );
-            }
         }
-        builder.add_system(Stage::Sample, "kinetic_energy", integrate::kinetic_energy);
         builder.add_system(Stage::Sample, "health_check", integrate::health_check);
         builder
     }

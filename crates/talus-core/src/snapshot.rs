@@ -121,6 +121,11 @@ pub struct GrainSnapshot {
     /// The nearest-image rule of `periodic` when it is not sheared (no periodic axis
     /// otherwise): [`Self::separation`] applies it to every candidate pair.
     image: crate::periodic::NearestImage,
+    /// Grain positions at the last [`Self::mark_move_reference`] (empty: none).
+    move_reference: Vec<DVec3>,
+    /// Largest squared nearest-image distance of a grain from its position at the last
+    /// mark, m²: see [`Self::largest_move_sq`].
+    largest_move_sq: f64,
 }
 
 impl GrainSnapshot {
@@ -177,15 +182,35 @@ impl GrainSnapshot {
         self.image = periodic.and_then(|b| b.nearest_image()).unwrap_or_default();
     }
 
+    /// Records the grains' current positions as the reference of
+    /// [`Self::largest_move_sq`] (the neighbour list does at each build).
+    pub fn mark_move_reference(&mut self) {
+        self.move_reference.clear();
+        self.move_reference
+            .extend(self.records.iter().map(|g| g.position));
+        self.largest_move_sq = 0.0;
+    }
+
+    /// Largest squared nearest-image distance of a grain from its position at the last
+    /// [`Self::mark_move_reference`], m², as of the last [`gather_snapshot`]: found while
+    /// the positions are copied, so that the neighbour list's staleness test needs no pass
+    /// over the grains of its own. Infinite when no reference applies (none marked, or
+    /// grains added, removed or reordered since).
+    #[inline]
+    pub fn largest_move_sq(&self) -> f64 {
+        if self.move_reference.is_empty() {
+            f64::INFINITY
+        } else {
+            self.largest_move_sq
+        }
+    }
+
     /// Separation p_a − p_b of two positions, the nearest image in a periodic box.
     // Always inlined: it runs for every candidate pair and every grain's staleness check,
     // and a call costs as much as the arithmetic.
     #[inline(always)]
     pub fn separation(&self, a: DVec3, b: DVec3) -> DVec3 {
-        match &self.periodic {
-            Some(box_) if box_.shear.is_some() => box_.min_image(a - b),
-            _ => self.image.apply(a - b),
-        }
+        nearest_separation(&self.periodic, &self.image, a - b)
     }
 
     /// Whether the periodic box is sheared (Lees–Edwards): then a pair's separation and
@@ -244,6 +269,19 @@ impl GrainSnapshot {
     /// Index of a wall entity in [`GrainSnapshot::walls`].
     pub fn wall_index(&self, entity: Entity) -> Option<usize> {
         self.walls.iter().position(|w| w.entity == entity)
+    }
+}
+
+/// The nearest image of the difference `d` of two positions ([`GrainSnapshot::separation`]).
+#[inline(always)]
+fn nearest_separation(
+    periodic: &Option<crate::periodic::PeriodicBox>,
+    image: &crate::periodic::NearestImage,
+    d: DVec3,
+) -> DVec3 {
+    match periodic {
+        Some(box_) if box_.shear.is_some() => box_.min_image(d),
+        _ => image.apply(d),
     }
 }
 
@@ -394,6 +432,11 @@ pub fn gather_snapshot(
     // does not depend on the thread count).
     let mut k = 0;
     s.max_radius = 0.0;
+    // The largest move since the reference is taken in the copy pass when the reference
+    // has one position per grain (a reordering found below voids it).
+    let track_moves = s.move_reference.len() == n;
+    let mut largest_move_sq: f64 = 0.0;
+    let (periodic_box, image) = (s.periodic, s.image);
     for (e, p, v, w, r, m, mat) in grains.contiguous_iter().expect("grain query is dense") {
         let range = k..k + e.len();
         k += e.len();
@@ -404,13 +447,18 @@ pub fn gather_snapshot(
         let (records, omega, material) = (
             &mut s.records[range.clone()],
             &mut s.omega[range.clone()],
-            &mut s.material[range],
+            &mut s.material[range.clone()],
         );
-        let (table_max_radius, ()) = rayon::join(
+        let reference: &[DVec3] = if track_moves {
+            &s.move_reference[range]
+        } else {
+            &[]
+        };
+        let ((table_max_radius, table_move_sq), ()) = rayon::join(
             || {
                 // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
-                // copy. The largest radius is taken in the same pass (a second pass would
-                // read every record again for one number).
+                // copy. The largest radius and the largest move are taken in the same
+                // pass (a second pass would read every record again for one number).
                 records
                     .par_chunks_mut(COPY_CHUNK)
                     .enumerate()
@@ -429,12 +477,25 @@ pub fn gather_snapshot(
                                 inverse_mass: 1.0 / m.0,
                             };
                         }
-                        r[from..to]
+                        let largest_radius = r[from..to]
                             .iter()
-                            .fold(0.0, |largest, r| f64::max(largest, r.0))
+                            .fold(0.0, |largest, r| f64::max(largest, r.0));
+                        let largest_move_sq = if track_moves {
+                            p[from..to]
+                                .iter()
+                                .zip(&reference[from..to])
+                                .map(|(p, q)| {
+                                    nearest_separation(&periodic_box, &image, p.0 - *q)
+                                        .length_squared()
+                                })
+                                .fold(0.0, f64::max)
+                        } else {
+                            0.0
+                        };
+                        (largest_radius, largest_move_sq)
                     })
-                    // A maximum: the same on any number of threads.
-                    .reduce(|| 0.0, f64::max)
+                    // Maxima: the same on any number of threads.
+                    .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
             },
             || {
                 copy_column(omega, w, |x| x.0);
@@ -442,7 +503,14 @@ pub fn gather_snapshot(
             },
         );
         s.max_radius = s.max_radius.max(table_max_radius);
+        largest_move_sq = largest_move_sq.max(table_move_sq);
     }
+    s.largest_move_sq = if track_moves && !reordered {
+        largest_move_sq
+    } else {
+        s.move_reference.clear();
+        f64::INFINITY
+    };
     if reordered {
         let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
         s.dense_of.clear();
@@ -473,5 +541,59 @@ pub fn gather_snapshot(
     }));
     if reordered || walls_changed {
         s.layout = s.layout.wrapping_add(1).max(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::periodic::PeriodicBox;
+    use bevy_ecs::system::RunSystemOnce;
+
+    fn spawn_grain(world: &mut World, position: DVec3) -> Entity {
+        world
+            .spawn((
+                Grain,
+                Position(position),
+                Velocity(DVec3::ZERO),
+                AngularVelocity(DVec3::ZERO),
+                Radius(0.5),
+                Mass(1.0),
+                MaterialId(0),
+            ))
+            .id()
+    }
+
+    fn gather(world: &mut World) -> f64 {
+        world.run_system_once(gather_snapshot).unwrap();
+        world.resource::<GrainSnapshot>().largest_move_sq()
+    }
+
+    /// The largest move found while gathering is the nearest-image distance from the
+    /// marked positions (a grain that crosses the periodic seam moved its short way), and
+    /// a change of the grains voids the mark.
+    #[test]
+    fn largest_move_is_the_nearest_image_distance_from_the_mark() {
+        let mut world = World::new();
+        world.insert_resource(GrainSnapshot::default());
+        world.insert_resource(PeriodicBox {
+            lo: DVec3::ZERO,
+            hi: DVec3::new(10.0, 10.0, 10.0),
+            axes: [true, false, false],
+            shear: None,
+        });
+        let a = spawn_grain(&mut world, DVec3::new(9.9, 5.0, 5.0));
+        let b = spawn_grain(&mut world, DVec3::new(3.0, 5.0, 5.0));
+        assert_eq!(gather(&mut world), f64::INFINITY, "no mark yet");
+        world.resource_mut::<GrainSnapshot>().mark_move_reference();
+        assert_eq!(gather(&mut world), 0.0);
+        // a crosses the seam at x = 10 (wrapped to 0.2: 0.3 along x, not 9.7); b moves 0.2
+        // along z.
+        world.get_mut::<Position>(a).unwrap().0 = DVec3::new(0.2, 5.0, 5.0);
+        world.get_mut::<Position>(b).unwrap().0 = DVec3::new(3.0, 5.0, 5.2);
+        let expected: f64 = 0.3f64.powi(2);
+        assert!((gather(&mut world) - expected).abs() < 1e-12 * expected);
+        spawn_grain(&mut world, DVec3::new(7.0, 5.0, 5.0));
+        assert_eq!(gather(&mut world), f64::INFINITY, "a grain was added");
     }
 }
