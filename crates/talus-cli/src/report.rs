@@ -227,6 +227,10 @@ pub struct Report {
     pub energy_ledger: bool,
     /// Energy series.
     pub samples: Vec<ReportSample>,
+    /// How many times the Verlet neighbour list was built, the priming pass's build
+    /// included (LAMMPS's "Neighbor list builds").
+    #[serde(default)]
+    pub neighbour_list_builds: u64,
     /// Timings (excluded from determinism comparisons).
     pub wall_clock: WallClock,
     /// Set if the run blew up.

@@ -287,6 +287,10 @@ pub fn run_scene(
             .get_resource::<ContactEnergyBooking>()
             .is_none_or(|b| b.0),
         samples,
+        neighbour_list_builds: sim
+            .world
+            .get_resource::<talus_collision::NeighbourList>()
+            .map_or(0, |list| list.builds),
         wall_clock: WallClock {
             total: elapsed,
             priming,

@@ -155,7 +155,7 @@ impl NeighbourList {
         }
         // Found while the snapshot was gathered (against the positions marked at the
         // last build); infinite when the grains changed since.
-        let largest_sq = s.largest_move_sq();
+        let largest_sq = s.move_bound_sq();
         if largest_sq > half * half {
             return true;
         }

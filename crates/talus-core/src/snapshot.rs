@@ -123,9 +123,9 @@ pub struct GrainSnapshot {
     image: crate::periodic::NearestImage,
     /// Grain positions at the last [`Self::mark_move_reference`] (empty: none).
     move_reference: Vec<DVec3>,
-    /// Largest squared nearest-image distance of a grain from its position at the last
-    /// mark, m²: see [`Self::largest_move_sq`].
-    largest_move_sq: f64,
+    /// The grains' displacements since the last mark, as of the last gather: see
+    /// [`Self::move_bound_sq`].
+    moves: Moves,
 }
 
 impl GrainSnapshot {
@@ -183,25 +183,30 @@ impl GrainSnapshot {
     }
 
     /// Records the grains' current positions as the reference of
-    /// [`Self::largest_move_sq`] (the neighbour list does at each build).
+    /// [`Self::move_bound_sq`] (the neighbour list does at each build).
     pub fn mark_move_reference(&mut self) {
         self.move_reference.clear();
         self.move_reference
             .extend(self.records.iter().map(|g| g.position));
-        self.largest_move_sq = 0.0;
+        self.moves = Moves::still();
     }
 
-    /// Largest squared nearest-image distance of a grain from its position at the last
-    /// [`Self::mark_move_reference`], m², as of the last [`gather_snapshot`]: found while
-    /// the positions are copied, so that the neighbour list's staleness test needs no pass
-    /// over the grains of its own. Infinite when no reference applies (none marked, or
-    /// grains added, removed or reordered since).
+    /// D², m², for a distance D such that every grain's displacement Δ since the last
+    /// [`Self::mark_move_reference`] (nearest image) lies within D of one common vector U,
+    /// as of the last [`gather_snapshot`]: the separation of any two grains has then
+    /// changed by at most |Δ_i − Δ_j| ≤ 2D. D is the smaller of the largest |Δ| (U = 0)
+    /// and the half diagonal of the box that bounds every Δ (U its centre), so a packing
+    /// that moves as a whole, or a flow whose displacements span a range away from zero
+    /// (a chute's layers over a still base), counts only the spread of its moves. Found
+    /// while the positions are copied, so the neighbour list's staleness test needs no
+    /// pass over the grains of its own. Infinite when no reference applies (none marked,
+    /// or grains added, removed or reordered since).
     #[inline]
-    pub fn largest_move_sq(&self) -> f64 {
+    pub fn move_bound_sq(&self) -> f64 {
         if self.move_reference.is_empty() {
             f64::INFINITY
         } else {
-            self.largest_move_sq
+            self.moves.bound_sq()
         }
     }
 
@@ -269,6 +274,62 @@ impl GrainSnapshot {
     /// Index of a wall entity in [`GrainSnapshot::walls`].
     pub fn wall_index(&self, entity: Entity) -> Option<usize> {
         self.walls.iter().position(|w| w.entity == entity)
+    }
+}
+
+/// The grains' displacements since a reference: the largest length, and the box that
+/// bounds them ([`GrainSnapshot::move_bound_sq`]).
+#[derive(Clone, Copy, Debug)]
+struct Moves {
+    /// Largest |Δ|², m².
+    largest_sq: f64,
+    /// Componentwise least Δ, m (+∞ with no grain).
+    low: DVec3,
+    /// Componentwise greatest Δ, m (−∞ with no grain).
+    high: DVec3,
+}
+
+impl Default for Moves {
+    fn default() -> Self {
+        Self::still()
+    }
+}
+
+impl Moves {
+    /// No displacement yet.
+    fn still() -> Self {
+        Self {
+            largest_sq: 0.0,
+            low: DVec3::splat(f64::INFINITY),
+            high: DVec3::splat(f64::NEG_INFINITY),
+        }
+    }
+
+    /// Adds one grain's displacement.
+    #[inline(always)]
+    fn add(&mut self, d: DVec3) {
+        self.largest_sq = self.largest_sq.max(d.length_squared());
+        self.low = self.low.min(d);
+        self.high = self.high.max(d);
+    }
+
+    /// Both sets of displacements.
+    fn merge(self, other: Self) -> Self {
+        Self {
+            largest_sq: self.largest_sq.max(other.largest_sq),
+            low: self.low.min(other.low),
+            high: self.high.max(other.high),
+        }
+    }
+
+    /// D² of [`GrainSnapshot::move_bound_sq`].
+    fn bound_sq(&self) -> f64 {
+        if self.low.x > self.high.x {
+            // No grain: nothing moved.
+            return 0.0;
+        }
+        let half_diagonal_sq = (0.5 * (self.high - self.low)).length_squared();
+        self.largest_sq.min(half_diagonal_sq)
     }
 }
 
@@ -432,10 +493,10 @@ pub fn gather_snapshot(
     // does not depend on the thread count).
     let mut k = 0;
     s.max_radius = 0.0;
-    // The largest move since the reference is taken in the copy pass when the reference
-    // has one position per grain (a reordering found below voids it).
+    // The moves since the reference are taken in the copy pass when the reference has one
+    // position per grain (a reordering found below voids it).
     let track_moves = s.move_reference.len() == n;
-    let mut largest_move_sq: f64 = 0.0;
+    let mut moves = Moves::still();
     let (periodic_box, image) = (s.periodic, s.image);
     for (e, p, v, w, r, m, mat) in grains.contiguous_iter().expect("grain query is dense") {
         let range = k..k + e.len();
@@ -454,7 +515,7 @@ pub fn gather_snapshot(
         } else {
             &[]
         };
-        let ((table_max_radius, table_move_sq), ()) = rayon::join(
+        let ((table_max_radius, table_moves), ()) = rayon::join(
             || {
                 // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
                 // copy. The largest radius and the largest move are taken in the same
@@ -480,22 +541,19 @@ pub fn gather_snapshot(
                         let largest_radius = r[from..to]
                             .iter()
                             .fold(0.0, |largest, r| f64::max(largest, r.0));
-                        let largest_move_sq = if track_moves {
-                            p[from..to]
-                                .iter()
-                                .zip(&reference[from..to])
-                                .map(|(p, q)| {
-                                    nearest_separation(&periodic_box, &image, p.0 - *q)
-                                        .length_squared()
-                                })
-                                .fold(0.0, f64::max)
-                        } else {
-                            0.0
-                        };
-                        (largest_radius, largest_move_sq)
+                        let mut moves = Moves::still();
+                        if track_moves {
+                            for (p, q) in p[from..to].iter().zip(&reference[from..to]) {
+                                moves.add(nearest_separation(&periodic_box, &image, p.0 - *q));
+                            }
+                        }
+                        (largest_radius, moves)
                     })
-                    // Maxima: the same on any number of threads.
-                    .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
+                    // Maxima and minima: the same on any number of threads.
+                    .reduce(
+                        || (0.0, Moves::still()),
+                        |a, b| (a.0.max(b.0), a.1.merge(b.1)),
+                    )
             },
             || {
                 copy_column(omega, w, |x| x.0);
@@ -503,14 +561,12 @@ pub fn gather_snapshot(
             },
         );
         s.max_radius = s.max_radius.max(table_max_radius);
-        largest_move_sq = largest_move_sq.max(table_move_sq);
+        moves = moves.merge(table_moves);
     }
-    s.largest_move_sq = if track_moves && !reordered {
-        largest_move_sq
-    } else {
+    s.moves = moves;
+    if !track_moves || reordered {
         s.move_reference.clear();
-        f64::INFINITY
-    };
+    }
     if reordered {
         let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
         s.dense_of.clear();
@@ -566,14 +622,15 @@ mod tests {
 
     fn gather(world: &mut World) -> f64 {
         world.run_system_once(gather_snapshot).unwrap();
-        world.resource::<GrainSnapshot>().largest_move_sq()
+        world.resource::<GrainSnapshot>().move_bound_sq()
     }
 
-    /// The largest move found while gathering is the nearest-image distance from the
-    /// marked positions (a grain that crosses the periodic seam moved its short way), and
-    /// a change of the grains voids the mark.
+    /// The bound is the smaller of the largest move and the half diagonal of the box of
+    /// moves, each move the nearest-image distance from the marked position (a grain that
+    /// crosses the periodic seam moved its short way); a change of the grains voids the
+    /// mark.
     #[test]
-    fn largest_move_is_the_nearest_image_distance_from_the_mark() {
+    fn move_bound_takes_nearest_images_and_the_box_of_moves() {
         let mut world = World::new();
         world.insert_resource(GrainSnapshot::default());
         world.insert_resource(PeriodicBox {
@@ -591,9 +648,32 @@ mod tests {
         // along z.
         world.get_mut::<Position>(a).unwrap().0 = DVec3::new(0.2, 5.0, 5.0);
         world.get_mut::<Position>(b).unwrap().0 = DVec3::new(3.0, 5.0, 5.2);
-        let expected: f64 = 0.3f64.powi(2);
+        // Displacements (0.3, 0, 0) (the short way across the seam, not 9.7 back) and
+        // (0, 0, 0.2): the half diagonal of their bounding box, √(0.15² + 0.1²) ≈ 0.18, is
+        // below the largest move, 0.3, and is the bound.
+        let expected: f64 = 0.15f64.powi(2) + 0.1f64.powi(2);
         assert!((gather(&mut world) - expected).abs() < 1e-12 * expected);
         spawn_grain(&mut world, DVec3::new(7.0, 5.0, 5.0));
         assert_eq!(gather(&mut world), f64::INFINITY, "a grain was added");
+    }
+
+    /// Grains that move together count only the spread of their moves: two grains carried
+    /// 2 m along y, one of them 0.1 m further, give D = 0.05 m (any pair's separation
+    /// changed by at most 2D = 0.1 m, exactly the change here), not the 2.1 m largest move.
+    #[test]
+    fn a_common_drift_does_not_count_against_the_skin() {
+        let mut world = World::new();
+        world.insert_resource(GrainSnapshot::default());
+        let a = spawn_grain(&mut world, DVec3::new(1.0, 0.0, 0.0));
+        let b = spawn_grain(&mut world, DVec3::new(2.0, 0.0, 0.0));
+        gather(&mut world);
+        world.resource_mut::<GrainSnapshot>().mark_move_reference();
+        world.get_mut::<Position>(a).unwrap().0 = DVec3::new(1.0, 2.0, 0.0);
+        world.get_mut::<Position>(b).unwrap().0 = DVec3::new(2.0, 2.1, 0.0);
+        let bound = gather(&mut world).sqrt();
+        assert!((bound - 0.05).abs() < 1e-12, "D = {bound}");
+        let s = world.resource::<GrainSnapshot>();
+        let change = (s.position(1) - s.position(0)).length() - 1.0;
+        assert!(change <= 2.0 * bound + 1e-12);
     }
 }
