@@ -574,19 +574,17 @@ fn narrow_chunk(
             }
         }
     };
-    let ask_partners = s.len() >= talus_core::snapshot::PREFETCH_FROM_GRAINS;
     let (locals, partners) = (local.chunks_exact(4), partner.chunks_exact(4));
     let (local_rest, partner_rest) = (locals.remainder(), partners.remainder());
     for (q, (four_local, four_partner)) in locals.zip(partners).enumerate() {
         let four_local: [u8; 4] = four_local.try_into().expect("four pairs");
         let four_partner: [u32; 4] = four_partner.try_into().expect("four pairs");
         ahead.step(2);
-        // A chunk's pairs reach grains all over the packing; at large sizes those are
-        // not in cache: ask for the positions and radii of the pairs a few batches ahead.
-        if ask_partners {
-            for &j in partner.iter().skip(4 * q + PARTNERS_AHEAD).take(4) {
-                talus_core::snapshot::prefetch_item(&s.records, j as usize);
-            }
+        // A chunk's pairs reach grains all over the packing, beyond a core's own cache at
+        // any size worth timing (the records of 32,000 grains are 2 MB): ask for the
+        // records of the pairs a few batches ahead.
+        for &j in partner.iter().skip(4 * q + PARTNERS_AHEAD).take(4) {
+            talus_core::snapshot::prefetch_item(&s.records, j as usize);
         }
         test(four_local.map(|l| base + l as usize), four_partner, 0xF);
     }

@@ -708,15 +708,13 @@ fn sum_range(
         }
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
-    let ask_ahead = len >= talus_core::snapshot::PREFETCH_FROM_GRAINS;
     if !pick {
         for &(bodies, forces) in tables {
             for (row, (b, f)) in bodies.iter().zip(forces).enumerate() {
                 // The table is in the order of its first bodies, so the first sides' totals
-                // are read in order; the second bodies' are not, and at large sizes they
-                // miss the cache: ask for them a few contacts ahead (only then: in cache,
-                // the requests cost more than they save).
-                if let Some(ahead) = bodies.get(row + SUM_AHEAD).filter(|_| ask_ahead) {
+                // are read in order; the second bodies' are not, and miss a core's own
+                // cache: ask for them a few contacts ahead.
+                if let Some(ahead) = bodies.get(row + SUM_AHEAD) {
                     let j = (ahead.b as usize).wrapping_sub(first);
                     prefetch_item(force, j);
                     prefetch_item(torque, j);
@@ -746,7 +744,7 @@ fn sum_range(
             }
             for k in 0..count {
                 let code = picked[k];
-                if ask_ahead && k + SUM_AHEAD < count {
+                if k + SUM_AHEAD < count {
                     let ahead = picked[k + SUM_AHEAD];
                     let b = &bodies[(ahead >> 1) as usize];
                     let j = if ahead & 1 == 1 { b.b } else { b.a } as usize;

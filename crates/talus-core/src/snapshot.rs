@@ -346,11 +346,6 @@ fn nearest_separation(
     }
 }
 
-/// From how many grains a loop that reads grain arrays out of order asks for them ahead
-/// ([`prefetch_item`]): fewer grains' arrays stay in a core's cache, where the requests
-/// cost more than they save (docs/performance.md, session 14).
-pub const PREFETCH_FROM_GRAINS: usize = 65_536;
-
 /// Asks the processor to bring the cache line holding `address` into the cache, without
 /// waiting. A hint only: nothing is read or written, and no address faults. Does nothing
 /// off x86-64. Every prefetch of the hot loops goes through this.
