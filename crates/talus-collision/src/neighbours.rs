@@ -1,8 +1,8 @@
 //! Verlet neighbour lists with a skin: candidate pairs within reach + skin are found on
-//! the cell grid only when some grain has moved more than half the skin since the last
-//! build; every other step tests just those candidates. Exact: a pair that comes within
-//! reach must have been within reach + skin at the last build, since neither grain has
-//! moved more than skin/2.
+//! the cell grid only when the grains have moved, about their common drift, more than half
+//! the skin since the last build; every other step tests just those candidates. Exact: a
+//! pair that comes within reach must have been within reach + skin at the last build,
+//! since its separation has changed by at most twice that bound.
 //!
 //! A build tests the grains of the 27 cells around each grain four at a time, in lanes,
 //! and keeps each chunk's pairs sorted by their gap, so that the narrow phase's pairs of a
@@ -35,8 +35,8 @@ pub struct CandidateChunk {
     pub(crate) partner: Vec<u32>,
     /// Each pair's gap at the build (distance less the reach of the pair), in units of
     /// [`GAP_UNITS`] per skin, rounded down, 0 for pairs already within reach: a pair
-    /// cannot be within reach while twice the largest move since the build is below its
-    /// gap. Increasing.
+    /// cannot be within reach while twice the bound D on the moves since the build
+    /// ([`GrainSnapshot::move_bound_sq`]) is below its gap. Increasing.
     pub(crate) gap: Vec<u16>,
 }
 
@@ -117,9 +117,9 @@ pub struct NeighbourList {
     pub builds: u64,
     /// Lees–Edwards image offset at the last build, m (0 without shear).
     offset: f64,
-    /// How much any pair's distance can have shrunk since the build, m: twice the largest
-    /// move of a grain (plus the change of the Lees–Edwards offset), as found by the last
-    /// staleness check.
+    /// How much any pair's distance can have shrunk since the build, m: twice the bound D
+    /// on the grains' moves (plus the change of the Lees–Edwards offset), as found by the
+    /// last staleness check.
     closing: f64,
 }
 
@@ -131,14 +131,16 @@ impl NeighbourList {
     }
 
     /// Whether the list must be rebuilt: first use, a changed set or order of grains or
-    /// walls (the snapshot's layout), or a grain that moved more than half the skin. When
-    /// it need not, sets [`Self::closing`] for this step.
+    /// walls (the snapshot's layout), or grains that moved, about their common drift, more
+    /// than half the skin ([`GrainSnapshot::move_bound_sq`]). When it need not, sets
+    /// [`Self::closing`] for this step.
     fn stale(&mut self, s: &GrainSnapshot) -> bool {
         if self.layout != s.layout {
             return true;
         }
         // Across a Lees–Edwards seam a pair's separation also changes with the image
-        // offset: exact as long as 2 × (largest move) + |change of Δ| stays within the skin.
+        // offset: exact as long as 2D + |change of Δ| stays within the skin (D the bound on
+        // the grains' moves).
         let mut shift = 0.0;
         if let Some(b) = s.periodic()
             && let Some(shear) = &b.shear
@@ -155,11 +157,11 @@ impl NeighbourList {
         }
         // Found while the snapshot was gathered (against the positions marked at the
         // last build); infinite when the grains changed since.
-        let largest_sq = s.move_bound_sq();
-        if largest_sq > half * half {
+        let bound_sq = s.move_bound_sq();
+        if bound_sq > half * half {
             return true;
         }
-        self.closing = 2.0 * largest_sq.sqrt() + shift;
+        self.closing = 2.0 * bound_sq.sqrt() + shift;
         false
     }
 

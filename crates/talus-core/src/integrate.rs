@@ -77,6 +77,7 @@ pub fn kick_drift_translation(
 }
 
 /// First rotational kick: ω += a·dt·T/I (spheres need no orientation for contact physics).
+#[allow(clippy::type_complexity)]
 pub fn first_kick_rotation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
@@ -89,6 +90,7 @@ pub fn first_kick_rotation(
     rotation_kick(kick, grains);
 }
 
+#[allow(clippy::type_complexity)]
 fn rotation_kick(
     kick: f64,
     mut grains: Query<
@@ -198,6 +200,7 @@ pub fn move_walls(clock: Res<Clock>, mut walls: Query<&mut Wall>) {
 /// Scheduled on its own in [`Stage::Sample`](crate::schedule::Stage::Sample) for the Gear
 /// integrator; the leapfrogs sum the same terms while they kick
 /// ([`second_kick_and_kinetic_energy`]).
+#[allow(clippy::type_complexity)]
 pub fn kinetic_energy(
     config: Res<SimConfig>,
     mut energy: ResMut<EnergySnapshot>,

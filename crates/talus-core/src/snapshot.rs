@@ -513,7 +513,7 @@ pub fn gather_snapshot(
         let ((table_max_radius, table_moves), ()) = rayon::join(
             || {
                 // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
-                // copy. The largest radius and the largest move are taken in the same
+                // copy. The largest radius and the moves are taken in the same
                 // pass (a second pass would read every record again for one number).
                 records
                     .par_chunks_mut(COPY_CHUNK)
