@@ -189,6 +189,22 @@ pub fn move_walls(clock: Res<Clock>, mut walls: Query<&mut Wall>) {
     }
 }
 
+/// The grain columns the second kick and the kinetic-energy sums read (velocities and spins
+/// writable for the kick).
+type KineticQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static mut Velocity,
+        &'static mut AngularVelocity,
+        &'static Mass,
+        &'static MomentOfInertia,
+        &'static Force,
+        &'static Torque,
+    ),
+    (With<Grain>, Without<Frozen>),
+>;
+
 /// Translational and rotational kinetic energy of the grains, and the staggering term
 /// that turns them into the kinetic energy the integrator conserves exactly.
 ///
@@ -198,44 +214,14 @@ pub fn move_walls(clock: Res<Clock>, mut walls: Query<&mut Wall>) {
 /// balance uses; it differs from ½ m v² by an O(dt²) term that vanishes with the force.
 ///
 /// Scheduled on its own in [`Stage::Sample`](crate::schedule::Stage::Sample) for the Gear
-/// integrator; the leapfrogs sum the same terms while they kick
-/// ([`second_kick_and_kinetic_energy`]).
-#[allow(clippy::type_complexity)]
+/// integrator (it then changes nothing: the pass of [`second_kick_and_kinetic_energy`] with
+/// no kick); the leapfrogs sum the same terms while they kick.
 pub fn kinetic_energy(
     config: Res<SimConfig>,
     mut energy: ResMut<EnergySnapshot>,
-    grains: Query<
-        (
-            &Velocity,
-            &AngularVelocity,
-            &Mass,
-            &MomentOfInertia,
-            &Force,
-            &Torque,
-        ),
-        (With<Grain>, Without<Frozen>),
-    >,
+    mut grains: KineticQuery,
 ) {
-    let terms = KineticTerms::new(&config);
-    // Summed per fixed chunk of grains, the chunks in order: the same sums on any number
-    // of threads.
-    let mut partial: Vec<[f64; 3]> = Vec::new();
-    for (v, w, m, i, f, t) in grains.contiguous_iter().expect("grain query is dense") {
-        partial.par_extend(
-            v.par_chunks(REDUCTION_CHUNK)
-                .zip(w.par_chunks(REDUCTION_CHUNK))
-                .zip(
-                    m.par_chunks(REDUCTION_CHUNK)
-                        .zip(i.par_chunks(REDUCTION_CHUNK)),
-                )
-                .zip(
-                    f.par_chunks(REDUCTION_CHUNK)
-                        .zip(t.par_chunks(REDUCTION_CHUNK)),
-                )
-                .map(|(((v, w), (m, i)), (f, t))| terms.chunk_sums(v, w, m, i, f, t)),
-        );
-    }
-    energy.store_kinetic(&partial);
+    kick_and_sum_kinetic(&config, 0.0, &mut energy, &mut grains);
 }
 
 /// Second kick of translation (and of rotation when it is integrated), v += (1 − a)·dt·F/m
@@ -244,26 +230,27 @@ pub fn kinetic_energy(
 /// torques, masses and inertias instead of two. Each chunk is kicked whole before it is
 /// summed, with the same operations in the same order as the two separate passes, so the
 /// state and the sums are the same to the bit.
-#[allow(clippy::type_complexity)]
 pub fn second_kick_and_kinetic_energy(
     config: Res<SimConfig>,
     clock: Res<Clock>,
     mut energy: ResMut<EnergySnapshot>,
-    mut grains: Query<
-        (
-            &mut Velocity,
-            &mut AngularVelocity,
-            &Mass,
-            &MomentOfInertia,
-            &Force,
-            &Torque,
-        ),
-        (With<Grain>, Without<Frozen>),
-    >,
+    mut grains: KineticQuery,
 ) {
-    let terms = KineticTerms::new(&config);
     // Zero in the priming pass: nothing moves, the energies are still sampled.
     let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
+    kick_and_sum_kinetic(&config, kick, &mut energy, &mut grains);
+}
+
+/// Kicks every chunk of grains by `kick` (nothing when 0; spins only with rotation) and
+/// sums its kinetic energies ([`kinetic_energy`]) while it is in cache, per fixed chunk of
+/// grains, the chunks in order: the same sums on any number of threads.
+fn kick_and_sum_kinetic(
+    config: &SimConfig,
+    kick: f64,
+    energy: &mut EnergySnapshot,
+    grains: &mut KineticQuery,
+) {
+    let terms = KineticTerms::new(config);
     let rotation = config.rotation;
     let mut partial: Vec<[f64; 3]> = Vec::new();
     for (mut v, mut w, m, i, f, t) in grains.contiguous_iter_mut().expect("grain query is dense") {
