@@ -81,23 +81,12 @@ pub fn kick_drift_translation(
 pub fn first_kick_rotation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
-    grains: Query<
-        (&mut AngularVelocity, &Torque, &MomentOfInertia),
-        (With<Grain>, Without<Frozen>),
-    >,
-) {
-    let kick = config.integrator.kick_before_drift() * clock.pass_dt;
-    rotation_kick(kick, grains);
-}
-
-#[allow(clippy::type_complexity)]
-fn rotation_kick(
-    kick: f64,
     mut grains: Query<
         (&mut AngularVelocity, &Torque, &MomentOfInertia),
         (With<Grain>, Without<Frozen>),
     >,
 ) {
+    let kick = config.integrator.kick_before_drift() * clock.pass_dt;
     if kick == 0.0 {
         return;
     }
@@ -251,7 +240,6 @@ fn kick_and_sum_kinetic(
     grains: &mut KineticQuery,
 ) {
     let terms = KineticTerms::new(config);
-    let rotation = config.rotation;
     let mut partial: Vec<[f64; 3]> = Vec::new();
     for (mut v, mut w, m, i, f, t) in grains.contiguous_iter_mut().expect("grain query is dense") {
         let (v, w) = (v.bypass_change_detection(), w.bypass_change_detection());
@@ -273,7 +261,7 @@ fn kick_and_sum_kinetic(
                         for (v, (f, m)) in v.iter_mut().zip(f.iter().zip(m)) {
                             v.0 += f.0 * (kick / m.0);
                         }
-                        if rotation {
+                        if terms.rotation {
                             for (w, (t, i)) in w.iter_mut().zip(t.iter().zip(i)) {
                                 w.0 += t.0 * (kick / i.0);
                             }

@@ -322,12 +322,9 @@ impl Moves {
         }
     }
 
-    /// D² of [`GrainSnapshot::move_bound_sq`].
+    /// D² of [`GrainSnapshot::move_bound_sq`]. With no grain the box is empty, its half
+    /// diagonal infinite, and the bound the largest move, 0.
     fn bound_sq(&self) -> f64 {
-        if self.low.x > self.high.x {
-            // No grain: nothing moved.
-            return 0.0;
-        }
         let half_diagonal_sq = (0.5 * (self.high - self.low)).length_squared();
         self.largest_sq.min(half_diagonal_sq)
     }
@@ -650,6 +647,12 @@ mod tests {
         assert!((gather(&mut world) - expected).abs() < 1e-12 * expected);
         spawn_grain(&mut world, DVec3::new(7.0, 5.0, 5.0));
         assert_eq!(gather(&mut world), f64::INFINITY, "a grain was added");
+    }
+
+    /// No grain: nothing moved (the empty box of moves gives no NaN).
+    #[test]
+    fn no_moves_bound_nothing() {
+        assert_eq!(Moves::still().bound_sq(), 0.0);
     }
 
     /// Grains that move together count only the spread of their moves: two grains carried
