@@ -219,7 +219,6 @@ fn update_contacts_inner(
     index.key_by(world, s, &mut orphans);
     let n = s.len();
     let chunks = n.div_ceil(CHUNK);
-    let gap_threshold = list.gap_threshold();
     let recycle = !index.never_recycle;
     let ContactIndex {
         per_grain,
@@ -246,7 +245,7 @@ fn update_contacts_inner(
                 s,
                 table,
                 range,
-                gap_threshold,
+                gap_threshold: list.gap_threshold(chunk),
             };
             // While this chunk is tested, the next chunk's contact lists and grains are
             // asked for, a few lines per batch of pairs: a chunk's pairs read them in no

@@ -38,10 +38,16 @@ pub struct CandidateChunk {
     /// cannot be within reach while twice the bound D on the moves since the build
     /// ([`GrainSnapshot::move_bound_sq`]) is below its gap. Increasing.
     pub(crate) gap: Vec<u16>,
+    /// The blocks of moves ([`GrainSnapshot::block_moves`]; a chunk is one) of the
+    /// partners, without repeats, in increasing order: the blocks whose moves, with the
+    /// chunk's own, bound how far this chunk's pairs can have closed.
+    pub(crate) partner_blocks: Vec<u32>,
 }
 
 // A chunk's grains are told apart by a byte.
 const _: () = assert!(CHUNK <= 256);
+// A chunk of the list is a block of the snapshot's moves.
+const _: () = assert!(CHUNK == talus_core::snapshot::MOVE_BLOCK);
 
 impl CandidateChunk {
     /// Number of candidate pairs.
@@ -91,6 +97,11 @@ impl CandidateChunk {
         self.local.extend(keys.iter().map(|&k| (k >> 32) as u8));
         self.partner.extend(keys.iter().map(|&k| k as u32));
         self.gap.extend(keys.iter().map(|&k| (k >> 40) as u16));
+        self.partner_blocks.clear();
+        self.partner_blocks
+            .extend(self.partner.iter().map(|&j| j / CHUNK as u32));
+        self.partner_blocks.sort_unstable();
+        self.partner_blocks.dedup();
     }
 }
 
@@ -121,6 +132,11 @@ pub struct NeighbourList {
     /// on the grains' moves (plus the change of the Lees–Edwards offset), as found by the
     /// last staleness check.
     closing: f64,
+    /// Per chunk, the gap quantum below which one of its candidate pairs may be within
+    /// reach this step ([`Self::gap_threshold`]), from the moves of the chunk's own block
+    /// and its partners' blocks: in a shear flow, far below the packing's
+    /// [`Self::closing`].
+    thresholds: Vec<u16>,
 }
 
 impl NeighbourList {
@@ -161,19 +177,45 @@ impl NeighbourList {
         if bound_sq > half * half {
             return true;
         }
-        self.closing = 2.0 * bound_sq.sqrt() + shift;
+        let packing_closing = 2.0 * bound_sq.sqrt();
+        self.closing = packing_closing + shift;
+        // Each chunk's pairs can have closed by at most the bound of the chunk's block
+        // and its partners' blocks (never more than the packing's bound, which also holds).
+        self.thresholds.clear();
+        if let Some(blocks) = s.block_moves()
+            && blocks.len() == self.chunks.len()
+        {
+            for (own, chunk) in blocks.iter().zip(&self.chunks) {
+                let closing = chunk
+                    .partner_blocks
+                    .iter()
+                    .map(|&b| own.pair_bound(&blocks[b as usize]))
+                    .fold(own.pair_bound(own), f64::max)
+                    .min(packing_closing);
+                self.thresholds.push(self.quanta(closing + shift));
+            }
+        }
         false
     }
 
-    /// The gap quantum below which a candidate pair may be within reach this step: pairs
-    /// whose [`CandidateChunk::gap`] is larger are not, and need no distance test. One
-    /// quantum of margin covers the rounding of the gaps.
-    pub fn gap_threshold(&self) -> u16 {
+    /// The gap quantum below which a candidate pair closing by at most `closing` may be
+    /// within reach. One quantum of margin covers the rounding of the gaps.
+    fn quanta(&self, closing: f64) -> u16 {
         if self.skin > 0.0 {
-            ((self.closing / self.skin * GAP_UNITS).ceil() + 1.0).min(GAP_UNITS) as u16
+            ((closing / self.skin * GAP_UNITS).ceil() + 1.0).min(GAP_UNITS) as u16
         } else {
             u16::MAX
         }
+    }
+
+    /// The gap quantum below which a candidate pair of chunk `chunk` may be within reach
+    /// this step: pairs whose [`CandidateChunk::gap`] is larger are not, and need no
+    /// distance test.
+    pub fn gap_threshold(&self, chunk: usize) -> u16 {
+        self.thresholds
+            .get(chunk)
+            .copied()
+            .unwrap_or_else(|| self.quanta(self.closing))
     }
 }
 
@@ -288,6 +330,7 @@ pub fn update_neighbour_list(
         .map_or(0.0, |shear| shear.offset);
     list.builds += 1;
     list.closing = 0.0;
+    list.thresholds.clear();
     snapshot.bypass_change_detection().mark_move_reference();
 }
 

@@ -8,6 +8,7 @@
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rayon::prelude::*;
+use smallvec::SmallVec;
 
 use crate::components::*;
 use crate::lanes::{F4, V4};
@@ -126,6 +127,9 @@ pub struct GrainSnapshot {
     /// The grains' displacements since the last mark, as of the last gather: see
     /// [`Self::move_bound_sq`].
     moves: Moves,
+    /// The same for each block of [`MOVE_BLOCK`] consecutive grains (empty when no
+    /// reference applies): see [`Self::block_moves`].
+    block_moves: Vec<BlockMoves>,
 }
 
 impl GrainSnapshot {
@@ -189,6 +193,9 @@ impl GrainSnapshot {
         self.move_reference
             .extend(self.records.iter().map(|g| g.position));
         self.moves = Moves::still();
+        self.block_moves.clear();
+        self.block_moves
+            .resize(self.len().div_ceil(MOVE_BLOCK), BlockMoves::default());
     }
 
     /// D², m², for a distance D such that every grain's displacement Δ since the last
@@ -208,6 +215,20 @@ impl GrainSnapshot {
         } else {
             self.moves.bound_sq()
         }
+    }
+
+    /// The moves since the last [`Self::mark_move_reference`] of each block of
+    /// [`MOVE_BLOCK`] consecutive grains in dense order (block `b` holds grains
+    /// `b * MOVE_BLOCK..`), as of the last [`gather_snapshot`]; `None` when no reference
+    /// applies. Grains near each other in dense order are near each other in space (the
+    /// scene sorts them along a space-filling curve), so a block's moves span far less
+    /// than the whole packing's in a shear flow: a pair of grains of two blocks has
+    /// changed its separation by at most [`BlockMoves::pair_bound`] of the two.
+    #[inline]
+    pub fn block_moves(&self) -> Option<&[BlockMoves]> {
+        (!self.move_reference.is_empty()
+            && self.block_moves.len() == self.len().div_ceil(MOVE_BLOCK))
+        .then_some(&self.block_moves[..])
     }
 
     /// Separation p_a − p_b of two positions, the nearest image in a periodic box.
@@ -277,6 +298,36 @@ impl GrainSnapshot {
     }
 }
 
+/// Grains per block of [`GrainSnapshot::block_moves`] (the neighbour list's chunks of grains
+/// are these blocks).
+pub const MOVE_BLOCK: usize = 256;
+
+/// How far the grains of one block moved since the reference
+/// ([`GrainSnapshot::block_moves`]): every displacement Δ of the block lies within
+/// `largest` of zero and within `spread` of `centre`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BlockMoves {
+    /// Centre of the box that bounds the block's displacements, m.
+    pub centre: DVec3,
+    /// Half the diagonal of that box, m.
+    pub spread: f64,
+    /// Largest |Δ| of the block, m.
+    pub largest: f64,
+}
+
+impl BlockMoves {
+    /// A bound on |Δ_i − Δ_j| for any grain i of this block and j of `other` (the same
+    /// block or another), hence on how much their separation has changed since the
+    /// reference: the smaller of |Δ_i| + |Δ_j| and, by the triangle inequality through
+    /// the two centres, the two spreads plus the distance between the centres.
+    #[inline]
+    pub fn pair_bound(&self, other: &Self) -> f64 {
+        let through_zero = self.largest + other.largest;
+        let through_centres = self.spread + other.spread + (self.centre - other.centre).length();
+        through_zero.min(through_centres)
+    }
+}
+
 /// The grains' displacements since a reference: the largest length, and the box that
 /// bounds them ([`GrainSnapshot::move_bound_sq`]).
 #[derive(Clone, Copy, Debug)]
@@ -327,6 +378,18 @@ impl Moves {
     fn bound_sq(&self) -> f64 {
         let half_diagonal_sq = (0.5 * (self.high - self.low)).length_squared();
         self.largest_sq.min(half_diagonal_sq)
+    }
+
+    /// The same moves as a [`BlockMoves`] (no move at all for no grain).
+    fn block(&self) -> BlockMoves {
+        if self.low.x > self.high.x {
+            return BlockMoves::default();
+        }
+        BlockMoves {
+            centre: 0.5 * (self.low + self.high),
+            spread: (0.5 * (self.high - self.low)).length(),
+            largest: self.largest_sq.sqrt(),
+        }
     }
 }
 
@@ -462,12 +525,12 @@ pub fn gather_snapshot(
             &Radius,
             &Mass,
             &MaterialId,
+            Has<Frozen>,
         ),
         With<Grain>,
     >,
     walls: Query<(Entity, &Wall)>,
     periodic: Option<Res<crate::periodic::PeriodicBox>>,
-    frozen: Query<Entity, (With<Grain>, With<Frozen>)>,
 ) {
     let s = &mut *snapshot;
     s.set_periodic(periodic.map(|p| *p));
@@ -488,15 +551,24 @@ pub fn gather_snapshot(
     // The moves since the reference are taken in the copy pass when the reference has one
     // position per grain (a reordering found below voids it).
     let track_moves = s.move_reference.len() == n;
-    let mut moves = Moves::still();
+    let mut block_moves = vec![
+        Moves::still();
+        if track_moves {
+            n.div_ceil(MOVE_BLOCK)
+        } else {
+            0
+        }
+    ];
     let (periodic_box, image) = (s.periodic, s.image);
-    for (e, p, v, w, r, m, mat) in grains.contiguous_iter().expect("grain query is dense") {
+    for (e, p, v, w, r, m, mat, frozen) in grains.contiguous_iter().expect("grain query is dense") {
+        let table_start = k;
         let range = k..k + e.len();
         k += e.len();
-        if !reordered && s.entity[range.clone()] != *e {
+        // Unchanged entities (the common case) need no copy.
+        if reordered || s.entity[range.clone()] != *e {
             reordered = true;
+            s.entity[range.clone()].copy_from_slice(e);
         }
-        s.entity[range.clone()].copy_from_slice(e);
         let (records, omega, material) = (
             &mut s.records[range.clone()],
             &mut s.omega[range.clone()],
@@ -507,7 +579,7 @@ pub fn gather_snapshot(
         } else {
             &[]
         };
-        let ((table_max_radius, table_moves), ()) = rayon::join(
+        let (chunk_results, ()) = rayon::join(
             || {
                 // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
                 // copy. The largest radius and the moves are taken in the same
@@ -522,40 +594,60 @@ pub fn gather_snapshot(
                             .iter()
                             .zip(&r[from..to])
                             .zip(v[from..to].iter().zip(&m[from..to]));
+                        // A frozen grain resists like an infinite mass (a zero inverse):
+                        // a contact's reduced mass is then the moving grain's own (as
+                        // LAMMPS does for frozen atoms). `Frozen` is a table component, so
+                        // a table's grains are all frozen or none is.
+                        let inverse_mass = |m: &Mass| if frozen { 0.0 } else { 1.0 / m.0 };
                         for (record, ((p, r), (v, m))) in records.iter_mut().zip(sources) {
                             *record = GrainRecord {
                                 position: p.0,
                                 radius: r.0,
                                 velocity: v.0,
-                                inverse_mass: 1.0 / m.0,
+                                inverse_mass: inverse_mass(m),
                             };
                         }
                         let largest_radius = r[from..to]
                             .iter()
                             .fold(0.0, |largest, r| f64::max(largest, r.0));
-                        let mut moves = Moves::still();
+                        // The moves of each block of grains (by dense index) this chunk
+                        // holds a part of; a table need not start at a block's start.
+                        let mut blocks: SmallVec<[(usize, Moves); 20]> = SmallVec::new();
                         if track_moves {
-                            for (p, q) in p[from..to].iter().zip(&reference[from..to]) {
-                                moves.add(nearest_separation(&periodic_box, &image, p.0 - *q));
+                            let mut from = from;
+                            while from < to {
+                                let block = (table_start + from) / MOVE_BLOCK;
+                                let end = ((block + 1) * MOVE_BLOCK - table_start).min(to);
+                                let mut moves = Moves::still();
+                                for (p, q) in p[from..end].iter().zip(&reference[from..end]) {
+                                    moves.add(nearest_separation(&periodic_box, &image, p.0 - *q));
+                                }
+                                blocks.push((block, moves));
+                                from = end;
                             }
                         }
-                        (largest_radius, moves)
+                        (largest_radius, blocks)
                     })
-                    // Maxima and minima: the same on any number of threads.
-                    .reduce(
-                        || (0.0, Moves::still()),
-                        |a, b| (a.0.max(b.0), a.1.merge(b.1)),
-                    )
+                    .collect::<Vec<_>>()
             },
             || {
                 copy_column(omega, w, |x| x.0);
                 copy_column(material, mat, |x| x.0);
             },
         );
-        s.max_radius = s.max_radius.max(table_max_radius);
-        moves = moves.merge(table_moves);
+        // Maxima and minima: the same on any number of threads.
+        for (largest_radius, blocks) in chunk_results {
+            s.max_radius = s.max_radius.max(largest_radius);
+            for (block, moves) in blocks {
+                block_moves[block] = block_moves[block].merge(moves);
+            }
+        }
     }
-    s.moves = moves;
+    s.moves = block_moves
+        .iter()
+        .fold(Moves::still(), |all, block| all.merge(*block));
+    s.block_moves.clear();
+    s.block_moves.extend(block_moves.iter().map(Moves::block));
     if !track_moves || reordered {
         s.move_reference.clear();
     }
@@ -565,13 +657,6 @@ pub fn gather_snapshot(
         s.dense_of.resize(max_index + 1, NO_INDEX);
         for (i, e) in s.entity.iter().enumerate() {
             s.dense_of[e.index_u32() as usize] = i as u32;
-        }
-    }
-    // A frozen grain resists like an infinite mass (a zero inverse): a contact's reduced
-    // mass is then the moving grain's own (as LAMMPS does for frozen atoms).
-    for e in &frozen {
-        if let Some(i) = s.dense(e) {
-            s.records[i].inverse_mass = 0.0;
         }
     }
     let walls_changed = s.walls.len() != walls.iter().len()
@@ -653,6 +738,56 @@ mod tests {
     #[test]
     fn no_moves_bound_nothing() {
         assert_eq!(Moves::still().bound_sq(), 0.0);
+    }
+
+    /// Each block of grains bounds its own moves, and two blocks' bound on how far a pair
+    /// of their grains closed holds for every such pair: a block carried along y with a
+    /// small spread, another at rest, a part of a block moving along x.
+    #[test]
+    fn block_moves_bound_every_pair_of_their_grains() {
+        let mut world = World::new();
+        world.insert_resource(GrainSnapshot::default());
+        // Two blocks and a part: grains on a line, 1 m apart.
+        let n = 2 * MOVE_BLOCK + 7;
+        let grains: Vec<Entity> = (0..n)
+            .map(|k| spawn_grain(&mut world, DVec3::new(k as f64, 0.0, 0.0)))
+            .collect();
+        gather(&mut world);
+        assert!(
+            world.resource::<GrainSnapshot>().block_moves().is_none(),
+            "no mark yet"
+        );
+        world.resource_mut::<GrainSnapshot>().mark_move_reference();
+        // The first block drifts 0.3 m along y, each grain a little further along z; the
+        // second stays; the last grains move 0.01 m along x.
+        for (k, &e) in grains.iter().enumerate() {
+            let d = match k / MOVE_BLOCK {
+                0 => DVec3::new(0.0, 0.3, 1e-4 * k as f64),
+                1 => DVec3::ZERO,
+                _ => DVec3::new(0.01, 0.0, 0.0),
+            };
+            world.get_mut::<Position>(e).unwrap().0 += d;
+        }
+        let packing = gather(&mut world).sqrt();
+        let s = world.resource::<GrainSnapshot>();
+        let blocks = s.block_moves().expect("marked, same grains");
+        assert_eq!(blocks.len(), 3);
+        let spread = 0.5 * 1e-4 * (MOVE_BLOCK - 1) as f64;
+        assert!((blocks[0].spread - spread).abs() < 1e-12, "{:?}", blocks[0]);
+        assert_eq!(blocks[1], BlockMoves::default());
+        assert!((blocks[2].largest - 0.01).abs() < 1e-12);
+        // Within the drifting block only the spread counts, far below the drift.
+        assert!(blocks[0].pair_bound(&blocks[0]) < 0.1 * 0.3);
+        for i in 0..n {
+            for j in i..n {
+                let (bi, bj) = (&blocks[i / MOVE_BLOCK], &blocks[j / MOVE_BLOCK]);
+                let bound = bi.pair_bound(bj);
+                let change =
+                    ((s.position(i) - s.position(j)).length() - (i as f64 - j as f64).abs()).abs();
+                assert!(change <= bound + 1e-12, "pair {i}, {j}: {change} > {bound}");
+                assert!(change <= 2.0 * packing + 1e-12);
+            }
+        }
     }
 
     /// Grains that move together count only the spread of their moves: two grains carried
