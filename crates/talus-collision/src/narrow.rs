@@ -341,6 +341,13 @@ fn update_contacts_inner(
     } = index;
     let mut reused = vec![false; ended_at.len()];
     let mut to_spawn: Vec<(u32, u32, Contact, &LawSlot)> = Vec::new();
+    // A new contact knows its bodies' places in this step's snapshot, which the force loop
+    // reads next: its first evaluation goes through the law's lane form like any other.
+    let bodies_of = |i: u32, j: u32| ContactBodies {
+        a: i,
+        b: j,
+        layout: s.layout,
+    };
     for &(i, j) in new_pairs[..chunks].iter().flatten() {
         let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
             let wall = &s.walls[k];
@@ -370,7 +377,7 @@ fn update_contacts_inner(
             let contact = ended_at[group.next].2;
             reused[group.next] = true;
             group.next += 1;
-            group.reuses.push((contact, pair));
+            group.reuses.push((contact, pair, bodies_of(i, j)));
             group.recycle = Some(slot.recycle);
             per_grain[i as usize].push(IndexEntry::new(j, contact));
         } else {
@@ -399,7 +406,7 @@ fn update_contacts_inner(
         world.despawn(c);
     }
     for (i, j, pair, slot) in to_spawn {
-        let contact = (slot.spawn)(world, pair);
+        let contact = (slot.spawn)(world, pair, bodies_of(i, j));
         per_grain[i as usize].push(IndexEntry::new(j, contact));
     }
     if world
@@ -419,8 +426,8 @@ struct Reusable {
     next: usize,
     /// One past the group's last ended contact.
     end: usize,
-    /// The ended contacts handed out, with their new pairs.
-    reuses: Vec<(Entity, Contact)>,
+    /// The ended contacts handed out, with their new pairs and the pairs' bodies.
+    reuses: Vec<(Entity, Contact, ContactBodies)>,
     /// The law's recycling function, once a contact is handed out.
     recycle: Option<RecycleContacts>,
 }

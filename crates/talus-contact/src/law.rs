@@ -269,13 +269,17 @@ pub struct LawChannels<L: ContactLaw> {
     _law: std::marker::PhantomData<fn() -> L>,
 }
 
-fn spawn_contact<L: ContactLaw>(world: &mut World, contact: Contact) -> Entity {
+fn spawn_contact<L: ContactLaw>(
+    world: &mut World,
+    contact: Contact,
+    bodies: ContactBodies,
+) -> Entity {
     world
         .spawn((
             contact,
             ContactGeometry::default(),
             ContactForce::default(),
-            ContactBodies::default(),
+            bodies,
             LawState::<L::History>(L::History::default()),
         ))
         .id()
@@ -283,7 +287,7 @@ fn spawn_contact<L: ContactLaw>(world: &mut World, contact: Contact) -> Entity {
 
 /// Hands ended contacts of law `L` (entities of its five-component archetype) to new
 /// pairs: each is left exactly as [`spawn_contact`] would have made it for its new pair.
-fn recycle_contacts<L: ContactLaw>(world: &mut World, reuses: &[(Entity, Contact)]) {
+fn recycle_contacts<L: ContactLaw>(world: &mut World, reuses: &[(Entity, Contact, ContactBodies)]) {
     let mut contacts = world.query::<(
         &mut Contact,
         &mut ContactGeometry,
@@ -291,14 +295,14 @@ fn recycle_contacts<L: ContactLaw>(world: &mut World, reuses: &[(Entity, Contact
         &mut ContactBodies,
         &mut LawState<L::History>,
     )>();
-    for &(entity, pair) in reuses {
+    for &(entity, pair, pair_bodies) in reuses {
         let (mut contact, mut geometry, mut force, mut bodies, mut history) = contacts
             .get_mut(world, entity)
             .expect("the narrow phase recycles only contacts of the law's archetype");
         *contact = pair;
         *geometry = ContactGeometry::default();
         *force = ContactForce::default();
-        *bodies = ContactBodies::default();
+        *bodies = pair_bodies;
         history.0 = L::History::default();
     }
 }
@@ -369,6 +373,7 @@ pub fn install_law<L: ContactLaw>(
                 kind: ContactKind::GrainGrain,
                 pair_slot: 0,
             },
+            ContactBodies::default(),
         );
         let archetype = sim.world.entity(probe).location().archetype_id;
         sim.world.despawn(probe);
@@ -577,7 +582,12 @@ mod tests {
             kind: ContactKind::GrainGrain,
             pair_slot,
         };
-        let old = spawn_contact::<Counting>(&mut world, pair(0, 1, 3));
+        let bodies = ContactBodies {
+            a: 2,
+            b: 3,
+            layout: 7,
+        };
+        let old = spawn_contact::<Counting>(&mut world, pair(0, 1, 3), ContactBodies::default());
         // A contact that has lived: every component away from a new contact's.
         let mut e = world.entity_mut(old);
         *e.get_mut::<ContactGeometry>().unwrap() = ContactGeometry {
@@ -597,8 +607,8 @@ mod tests {
         };
         e.get_mut::<LawState<u64>>().unwrap().0 = 41;
 
-        recycle_contacts::<Counting>(&mut world, &[(old, pair(2, 3, 1))]);
-        let spawned = spawn_contact::<Counting>(&mut world, pair(2, 3, 1));
+        recycle_contacts::<Counting>(&mut world, &[(old, pair(2, 3, 1), bodies)]);
+        let spawned = spawn_contact::<Counting>(&mut world, pair(2, 3, 1), bodies);
         assert_eq!(components(&world, old), components(&world, spawned));
         assert_eq!(world.get::<Contact>(old).unwrap().a, grains[2]);
     }

@@ -25,8 +25,8 @@ pub const ENERGY_CHUNK_LEN: usize = 256;
 const FORCE_CHUNKS_PER_JOB: usize = 1;
 
 /// Gives ended contacts of one law to new pairs ([`LawSlot::recycle`]): each listed entity
-/// is overwritten with what a spawn would give its new pair.
-pub type RecycleContacts = fn(&mut World, &[(Entity, Contact)]);
+/// is overwritten with what a spawn would give its new pair (with the pair's bodies).
+pub type RecycleContacts = fn(&mut World, &[(Entity, Contact, ContactBodies)]);
 
 /// Whether the force loops use the laws' lane forms ([`ContactLaw::evaluate_lanes`])
 /// where a law has one: on unless this resource says otherwise. The results are the same
@@ -42,8 +42,9 @@ pub struct LawSlot {
     pub law: &'static str,
     /// Index into the law's [`PairParams`].
     pub pair_slot: u32,
-    /// Spawns a contact entity with the law's history component.
-    pub spawn: fn(&mut World, Contact) -> Entity,
+    /// Spawns a contact entity with the law's history component, and its bodies' places
+    /// in the snapshot (so that its first evaluation can go through the law's lane form).
+    pub spawn: fn(&mut World, Contact, ContactBodies) -> Entity,
     /// The archetype of this law's contacts (the five components [`Self::spawn`] gives,
     /// nothing else): a contact that ended in it may be handed to a new pair of the law by
     /// [`Self::recycle`].
