@@ -245,7 +245,7 @@ fn update_contacts_inner(
                 s,
                 table,
                 range,
-                gap_threshold: list.gap_threshold(chunk),
+                gap_threshold: list.gap_threshold(chunk, s),
             };
             // While this chunk is tested, the next chunk's contact lists and grains are
             // asked for, a few lines per batch of pairs: a chunk's pairs read them in no

@@ -10,6 +10,7 @@
 
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
+use smallvec::SmallVec;
 use talus_core::lanes::{F4, V4};
 use talus_core::periodic::{ImageLanes, LeesEdwards, NearestImage, PeriodicBox};
 use talus_core::snapshot::{GrainReader, GrainSnapshot};
@@ -41,7 +42,7 @@ pub struct CandidateChunk {
     /// The blocks of moves ([`GrainSnapshot::block_moves`]; a chunk is one) of the
     /// partners, without repeats, in increasing order: the blocks whose moves, with the
     /// chunk's own, bound how far this chunk's pairs can have closed.
-    pub(crate) partner_blocks: Vec<u32>,
+    pub(crate) partner_blocks: SmallVec<[u32; 16]>,
 }
 
 // A chunk's grains are told apart by a byte.
@@ -97,11 +98,10 @@ impl CandidateChunk {
         self.local.extend(keys.iter().map(|&k| (k >> 32) as u8));
         self.partner.extend(keys.iter().map(|&k| k as u32));
         self.gap.extend(keys.iter().map(|&k| (k >> 40) as u16));
-        self.partner_blocks.clear();
-        self.partner_blocks
-            .extend(self.partner.iter().map(|&j| j / CHUNK as u32));
-        self.partner_blocks.sort_unstable();
-        self.partner_blocks.dedup();
+        let mut blocks: Vec<u32> = self.partner.iter().map(|&j| j / CHUNK as u32).collect();
+        blocks.sort_unstable();
+        blocks.dedup();
+        self.partner_blocks = blocks.into_iter().collect();
     }
 }
 
@@ -132,11 +132,11 @@ pub struct NeighbourList {
     /// on the grains' moves (plus the change of the Lees–Edwards offset), as found by the
     /// last staleness check.
     closing: f64,
-    /// Per chunk, the gap quantum below which one of its candidate pairs may be within
-    /// reach this step ([`Self::gap_threshold`]), from the moves of the chunk's own block
-    /// and its partners' blocks: in a shear flow, far below the packing's
-    /// [`Self::closing`].
-    thresholds: Vec<u16>,
+    /// [`Self::closing`] without the change of the Lees–Edwards offset: twice the bound D
+    /// on the whole packing's moves, m.
+    packing_closing: f64,
+    /// The change of the Lees–Edwards offset since the build, m (0 without shear).
+    shift: f64,
 }
 
 impl NeighbourList {
@@ -177,24 +177,9 @@ impl NeighbourList {
         if bound_sq > half * half {
             return true;
         }
-        let packing_closing = 2.0 * bound_sq.sqrt();
-        self.closing = packing_closing + shift;
-        // Each chunk's pairs can have closed by at most the bound of the chunk's block
-        // and its partners' blocks (never more than the packing's bound, which also holds).
-        self.thresholds.clear();
-        if let Some(blocks) = s.block_moves()
-            && blocks.len() == self.chunks.len()
-        {
-            for (own, chunk) in blocks.iter().zip(&self.chunks) {
-                let closing = chunk
-                    .partner_blocks
-                    .iter()
-                    .map(|&b| own.pair_bound(&blocks[b as usize]))
-                    .fold(own.pair_bound(own), f64::max)
-                    .min(packing_closing);
-                self.thresholds.push(self.quanta(closing + shift));
-            }
-        }
+        self.packing_closing = 2.0 * bound_sq.sqrt();
+        self.shift = shift;
+        self.closing = self.packing_closing + shift;
         false
     }
 
@@ -209,13 +194,27 @@ impl NeighbourList {
     }
 
     /// The gap quantum below which a candidate pair of chunk `chunk` may be within reach
-    /// this step: pairs whose [`CandidateChunk::gap`] is larger are not, and need no
-    /// distance test.
-    pub fn gap_threshold(&self, chunk: usize) -> u16 {
-        self.thresholds
-            .get(chunk)
-            .copied()
-            .unwrap_or_else(|| self.quanta(self.closing))
+    /// this step, `s` the step's snapshot: pairs whose [`CandidateChunk::gap`] is larger
+    /// are not, and need no distance test. A chunk's pairs can have closed by at most the
+    /// largest bound of its block's moves with its own and its partners' blocks
+    /// ([`BlockMoves::pair_bound`](talus_core::snapshot::BlockMoves::pair_bound)), never more than the packing's bound, which also
+    /// holds. Computed by the narrow phase chunk by chunk, in its parallel pass.
+    pub fn gap_threshold(&self, chunk: usize, s: &GrainSnapshot) -> u16 {
+        let (Some(blocks), Some(candidates)) = (s.block_moves(), self.chunks.get(chunk)) else {
+            return self.quanta(self.closing);
+        };
+        if blocks.len() != self.chunks.len() {
+            return self.quanta(self.closing);
+        }
+        let own = &blocks[chunk];
+        let mut closing = own.pair_bound(own);
+        for &b in &candidates.partner_blocks {
+            if closing >= self.packing_closing {
+                break;
+            }
+            closing = closing.max(own.pair_bound(&blocks[b as usize]));
+        }
+        self.quanta(closing.min(self.packing_closing) + self.shift)
     }
 }
 
@@ -330,7 +329,8 @@ pub fn update_neighbour_list(
         .map_or(0.0, |shear| shear.offset);
     list.builds += 1;
     list.closing = 0.0;
-    list.thresholds.clear();
+    list.packing_closing = 0.0;
+    list.shift = 0.0;
     snapshot.bypass_change_detection().mark_move_reference();
 }
 
