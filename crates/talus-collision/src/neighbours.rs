@@ -128,12 +128,9 @@ pub struct NeighbourList {
     pub builds: u64,
     /// Lees–Edwards image offset at the last build, m (0 without shear).
     offset: f64,
-    /// How much any pair's distance can have shrunk since the build, m: twice the bound D
-    /// on the grains' moves (plus the change of the Lees–Edwards offset), as found by the
-    /// last staleness check.
-    closing: f64,
-    /// [`Self::closing`] without the change of the Lees–Edwards offset: twice the bound D
-    /// on the whole packing's moves, m.
+    /// Twice the bound D on the whole packing's moves since the build, m, as found by the
+    /// last staleness check: how much any pair's distance can have shrunk, less the change
+    /// of the Lees–Edwards offset.
     packing_closing: f64,
     /// The change of the Lees–Edwards offset since the build, m (0 without shear).
     shift: f64,
@@ -149,7 +146,7 @@ impl NeighbourList {
     /// Whether the list must be rebuilt: first use, a changed set or order of grains or
     /// walls (the snapshot's layout), or grains that moved, about their common drift, more
     /// than half the skin ([`GrainSnapshot::move_bound_sq`]). When it need not, sets
-    /// [`Self::closing`] for this step.
+    /// [`Self::packing_closing`] and [`Self::shift`] for this step.
     fn stale(&mut self, s: &GrainSnapshot) -> bool {
         if self.layout != s.layout {
             return true;
@@ -179,7 +176,6 @@ impl NeighbourList {
         }
         self.packing_closing = 2.0 * bound_sq.sqrt();
         self.shift = shift;
-        self.closing = self.packing_closing + shift;
         false
     }
 
@@ -200,12 +196,10 @@ impl NeighbourList {
     /// ([`BlockMoves::pair_bound`](talus_core::snapshot::BlockMoves::pair_bound)), never more than the packing's bound, which also
     /// holds. Computed by the narrow phase chunk by chunk, in its parallel pass.
     pub fn gap_threshold(&self, chunk: usize, s: &GrainSnapshot) -> u16 {
-        let (Some(blocks), Some(candidates)) = (s.block_moves(), self.chunks.get(chunk)) else {
-            return self.quanta(self.closing);
+        let blocks = s.block_moves().filter(|b| b.len() == self.chunks.len());
+        let (Some(blocks), Some(candidates)) = (blocks, self.chunks.get(chunk)) else {
+            return self.quanta(self.packing_closing + self.shift);
         };
-        if blocks.len() != self.chunks.len() {
-            return self.quanta(self.closing);
-        }
         let own = &blocks[chunk];
         let mut closing = own.pair_bound(own);
         for &b in &candidates.partner_blocks {
@@ -328,7 +322,6 @@ pub fn update_neighbour_list(
         .and_then(|b| b.shear)
         .map_or(0.0, |shear| shear.offset);
     list.builds += 1;
-    list.closing = 0.0;
     list.packing_closing = 0.0;
     list.shift = 0.0;
     snapshot.bypass_change_detection().mark_move_reference();

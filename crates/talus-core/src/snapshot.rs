@@ -130,6 +130,9 @@ pub struct GrainSnapshot {
     /// The same for each block of [`MOVE_BLOCK`] consecutive grains (empty when no
     /// reference applies): see [`Self::block_moves`].
     block_moves: Vec<BlockMoves>,
+    /// The blocks' moves as [`gather_snapshot`] merges them (scratch, kept for its
+    /// allocation).
+    block_scratch: Vec<Moves>,
 }
 
 impl GrainSnapshot {
@@ -551,14 +554,12 @@ pub fn gather_snapshot(
     // The moves since the reference are taken in the copy pass when the reference has one
     // position per grain (a reordering found below voids it).
     let track_moves = s.move_reference.len() == n;
-    let mut block_moves = vec![
-        Moves::still();
-        if track_moves {
-            n.div_ceil(MOVE_BLOCK)
-        } else {
-            0
-        }
-    ];
+    // The blocks' moves are merged in the snapshot's scratch list (no allocation a step).
+    let mut block_moves = std::mem::take(&mut s.block_scratch);
+    block_moves.clear();
+    if track_moves {
+        block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
+    }
     let (periodic_box, image) = (s.periodic, s.image);
     for (e, p, v, w, r, m, mat, frozen) in grains.contiguous_iter().expect("grain query is dense") {
         let table_start = k;
@@ -648,6 +649,7 @@ pub fn gather_snapshot(
         .fold(Moves::still(), |all, block| all.merge(*block));
     s.block_moves.clear();
     s.block_moves.extend(block_moves.iter().map(Moves::block));
+    s.block_scratch = block_moves;
     if !track_moves || reordered {
         s.move_reference.clear();
     }
