@@ -98,10 +98,11 @@ impl CandidateChunk {
         self.local.extend(keys.iter().map(|&k| (k >> 32) as u8));
         self.partner.extend(keys.iter().map(|&k| k as u32));
         self.gap.extend(keys.iter().map(|&k| (k >> 40) as u16));
-        let mut blocks: Vec<u32> = self.partner.iter().map(|&j| j / CHUNK as u32).collect();
-        blocks.sort_unstable();
-        blocks.dedup();
-        self.partner_blocks = blocks.into_iter().collect();
+        self.partner_blocks.clear();
+        self.partner_blocks
+            .extend(self.partner.iter().map(|&j| j / CHUNK as u32));
+        self.partner_blocks.sort_unstable();
+        self.partner_blocks.dedup();
     }
 }
 

@@ -133,6 +133,9 @@ pub struct GrainSnapshot {
     /// The blocks' moves as [`gather_snapshot`] merges them (scratch, kept for its
     /// allocation).
     block_scratch: Vec<Moves>,
+    /// What each chunk of [`gather_snapshot`]'s copy found (scratch, kept for its
+    /// allocation).
+    chunk_scratch: Vec<ChunkMoves>,
 }
 
 impl GrainSnapshot {
@@ -515,6 +518,12 @@ fn copy_column<T: Sync, U: Send>(dst: &mut [U], src: &[T], value: impl Fn(&T) ->
         });
 }
 
+/// What one chunk of [`gather_snapshot`]'s copy found: its largest radius and the moves of
+/// each block of grains (by index) it holds a part of (a chunk of `COPY_CHUNK` grains not
+/// aligned on the blocks touches `COPY_CHUNK / MOVE_BLOCK + 1` of them; more spill to the
+/// heap).
+type ChunkMoves = (f64, SmallVec<[(usize, Moves); 20]>);
+
 /// Copies grain and wall state into the snapshot, reusing its allocations.
 #[allow(clippy::type_complexity)]
 pub fn gather_snapshot(
@@ -556,6 +565,7 @@ pub fn gather_snapshot(
     let track_moves = s.move_reference.len() == n;
     // The blocks' moves are merged in the snapshot's scratch list (no allocation a step).
     let mut block_moves = std::mem::take(&mut s.block_scratch);
+    let mut chunk_results = std::mem::take(&mut s.chunk_scratch);
     block_moves.clear();
     if track_moves {
         block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
@@ -580,15 +590,15 @@ pub fn gather_snapshot(
         } else {
             &[]
         };
-        let (chunk_results, ()) = rayon::join(
+        chunk_results.clear();
+        rayon::join(
             || {
                 // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
                 // copy. The largest radius and the moves are taken in the same
                 // pass (a second pass would read every record again for one number).
-                records
-                    .par_chunks_mut(COPY_CHUNK)
-                    .enumerate()
-                    .map(|(c, records)| {
+                // Kept between steps for its allocation; extended in chunk order.
+                chunk_results.par_extend(records.par_chunks_mut(COPY_CHUNK).enumerate().map(
+                    |(c, records)| {
                         let from = c * COPY_CHUNK;
                         let to = from + records.len();
                         let sources = p[from..to]
@@ -613,7 +623,7 @@ pub fn gather_snapshot(
                             .fold(0.0, |largest, r| f64::max(largest, r.0));
                         // The moves of each block of grains (by dense index) this chunk
                         // holds a part of; a table need not start at a block's start.
-                        let mut blocks: SmallVec<[(usize, Moves); 20]> = SmallVec::new();
+                        let mut blocks = SmallVec::new();
                         if track_moves {
                             let mut from = from;
                             while from < to {
@@ -628,8 +638,8 @@ pub fn gather_snapshot(
                             }
                         }
                         (largest_radius, blocks)
-                    })
-                    .collect::<Vec<_>>()
+                    },
+                ));
             },
             || {
                 copy_column(omega, w, |x| x.0);
@@ -637,7 +647,7 @@ pub fn gather_snapshot(
             },
         );
         // Maxima and minima: the same on any number of threads.
-        for (largest_radius, blocks) in chunk_results {
+        for (largest_radius, blocks) in chunk_results.drain(..) {
             s.max_radius = s.max_radius.max(largest_radius);
             for (block, moves) in blocks {
                 block_moves[block] = block_moves[block].merge(moves);
@@ -650,6 +660,7 @@ pub fn gather_snapshot(
     s.block_moves.clear();
     s.block_moves.extend(block_moves.iter().map(Moves::block));
     s.block_scratch = block_moves;
+    s.chunk_scratch = chunk_results;
     if !track_moves || reordered {
         s.move_reference.clear();
     }
