@@ -186,3 +186,81 @@ pub mod sampling {
             .expect("a field sample was taken")
     }
 }
+
+/// Every grain's position, velocity and spin, by entity, as bits.
+pub fn grain_bits(world: &mut World) -> std::collections::BTreeMap<u64, Vec<u64>> {
+    let mut q =
+        world.query_filtered::<(Entity, &Position, &Velocity, &AngularVelocity), With<Grain>>();
+    q.iter(world)
+        .map(|(e, p, v, w)| {
+            let bits = [p.0, v.0, w.0]
+                .iter()
+                .flat_map(|x| x.to_array())
+                .map(f64::to_bits)
+                .collect();
+            (e.to_bits(), bits)
+        })
+        .collect()
+}
+
+/// Every contact's geometry, force, torques and history, by pair, as bits.
+pub fn contact_bits(world: &mut World) -> std::collections::BTreeMap<(u64, u64), Vec<u64>> {
+    let mut q = world.query::<(
+        &talus::contact::Contact,
+        &talus::contact::ContactGeometry,
+        &talus::contact::ContactForce,
+        &talus::contact::LawState<talus_linear_spring::TangentialSpring>,
+    )>();
+    q.iter(world)
+        .map(|(c, g, f, h)| {
+            let h = &h.0;
+            let values = [
+                g.normal,
+                g.point,
+                f.force,
+                f.torque_a,
+                f.torque_b,
+                h.spring,
+                h.tangential_dashpot,
+            ]
+            .iter()
+            .flat_map(|x| x.to_array())
+            .chain([g.overlap, h.normal_dashpot, h.normal_spring])
+            .map(f64::to_bits)
+            .collect();
+            ((c.a.to_bits(), c.b.to_bits()), values)
+        })
+        .collect()
+}
+
+/// The energies and ledger of the last step, as bits.
+pub fn energy_bits(world: &World) -> Vec<u64> {
+    let e = world.resource::<EnergySnapshot>();
+    let l = world.resource::<EnergyLedger>();
+    [
+        e.translational_kinetic,
+        e.rotational_kinetic,
+        e.elastic,
+        e.max_overlap_ratio,
+        l.gravity_work,
+        l.wall_work,
+        l.integration_error,
+    ]
+    .into_iter()
+    .chain(l.dissipated.iter().copied())
+    .map(f64::to_bits)
+    .collect()
+}
+
+/// What [`state_bits`] returns.
+pub type StateBits = (
+    std::collections::BTreeMap<u64, Vec<u64>>,
+    std::collections::BTreeMap<(u64, u64), Vec<u64>>,
+    Vec<u64>,
+);
+
+/// The grains, the linear-law contacts and the energies of the last step, as bits
+/// ([`grain_bits`], [`contact_bits`], [`energy_bits`]).
+pub fn state_bits(world: &mut World) -> StateBits {
+    (grain_bits(world), contact_bits(world), energy_bits(world))
+}
