@@ -8,12 +8,78 @@
 
 mod common;
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
-use std::collections::BTreeMap;
-
-use talus::contact::{Contact, ContactForce, ContactGeometry, LaneForms};
+use bevy_ecs::prelude::*;
+use talus::contact::{Contact, ContactForce, ContactGeometry, LaneForms, LawState};
 use talus::core::prelude::*;
+use talus_linear_spring::TangentialSpring;
+
+/// Every grain's position, velocity and spin, by entity, as bits.
+fn grain_bits(world: &mut World) -> BTreeMap<u64, Vec<u64>> {
+    let mut q =
+        world.query_filtered::<(Entity, &Position, &Velocity, &AngularVelocity), With<Grain>>();
+    q.iter(world)
+        .map(|(e, p, v, w)| {
+            let bits = [p.0, v.0, w.0]
+                .iter()
+                .flat_map(|x| x.to_array())
+                .map(f64::to_bits)
+                .collect();
+            (e.to_bits(), bits)
+        })
+        .collect()
+}
+
+/// Every contact's geometry, force, torques and history, by pair, as bits.
+fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> {
+    let mut q = world.query::<(
+        &Contact,
+        &ContactGeometry,
+        &ContactForce,
+        &LawState<TangentialSpring>,
+    )>();
+    q.iter(world)
+        .map(|(c, g, f, h)| {
+            let h = &h.0;
+            let values = [
+                g.normal,
+                g.point,
+                f.force,
+                f.torque_a,
+                f.torque_b,
+                h.spring,
+                h.tangential_dashpot,
+            ]
+            .iter()
+            .flat_map(|x| x.to_array())
+            .chain([g.overlap, h.normal_dashpot, h.normal_spring])
+            .map(f64::to_bits)
+            .collect();
+            ((c.a.to_bits(), c.b.to_bits()), values)
+        })
+        .collect()
+}
+
+/// The energies and ledger of the last step, as bits.
+fn energy_bits(world: &World) -> Vec<u64> {
+    let e = world.resource::<EnergySnapshot>();
+    let l = world.resource::<EnergyLedger>();
+    [
+        e.translational_kinetic,
+        e.rotational_kinetic,
+        e.elastic,
+        e.max_overlap_ratio,
+        l.gravity_work,
+        l.wall_work,
+        l.integration_error,
+    ]
+    .into_iter()
+    .chain(l.dissipated.iter().copied())
+    .map(f64::to_bits)
+    .collect()
+}
 
 /// Runs `steps` steps of a scene with the lane forms on or off; returns the grains, the
 /// contacts and the energies at the end, and the number of active contacts.
@@ -23,7 +89,12 @@ fn run(text: &str, steps: u64, lanes: bool) -> (impl PartialEq + std::fmt::Debug
     sim.prime().unwrap();
     sim.run_steps(steps).unwrap();
     let contacts = sim.world.resource::<EnergySnapshot>().contacts;
-    (common::state_bits(&mut sim.world), contacts)
+    let state = (
+        grain_bits(&mut sim.world),
+        contact_bits(&mut sim.world),
+        energy_bits(&sim.world),
+    );
+    (state, contacts)
 }
 
 /// Asserts that a scene ends the same with and without the lane forms.
@@ -286,9 +357,9 @@ fn the_hertz_chute_flow_is_the_same_with_lanes() {
             })
             .collect();
         (
-            common::grain_bits(&mut sim.world),
+            grain_bits(&mut sim.world),
             contacts,
-            common::energy_bits(&sim.world),
+            energy_bits(&sim.world),
         )
     };
     assert!(

@@ -8,14 +8,11 @@
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use rayon::prelude::*;
-use smallvec::SmallVec;
 
 use crate::components::*;
 use crate::energy::{EnergyLedger, EnergySnapshot};
 use crate::lanes::{F4, V4};
-use crate::periodic::{PeriodicBox, PlainWrap};
 use crate::resources::{BlowUp, Clock, Health, SimConfig};
-use crate::snapshot::{ChunkMoves, FirstPassChunk, GrainRecord, GrainSnapshot, SnapshotRows};
 
 /// Grains below this count are integrated on one thread: spawning tasks costs more.
 const PARALLEL_THRESHOLD: usize = 4096;
@@ -23,296 +20,93 @@ const PARALLEL_THRESHOLD: usize = 4096;
 /// Chunk length for the fixed-shape parallel reductions (results do not depend on threads).
 const REDUCTION_CHUNK: usize = 1024;
 
-/// The grain columns the step's first pass ([`kick_drift_snapshot`]) reads and writes.
-type FirstPassQuery<'w, 's> = Query<
-    'w,
-    's,
-    (
-        Entity,
-        (
-            &'static mut Position,
-            &'static mut Velocity,
-            &'static mut AngularVelocity,
-        ),
-        (
-            &'static Force,
-            &'static Torque,
-            &'static Mass,
-            &'static MomentOfInertia,
-        ),
-        (&'static Radius, &'static MaterialId, Has<Frozen>),
-    ),
-    With<Grain>,
->;
-
-/// Whether the step's first pass ([`kick_drift_snapshot`]) copies the grains into the
-/// snapshot (the default, as without this resource), or leaves the copy to the broad
-/// phase's [`crate::snapshot::gather_snapshot`] (for comparisons: the results are the
-/// same to the bit).
-#[derive(Resource, Clone, Copy, Debug)]
-pub struct SnapshotInFirstPass(pub bool);
-
-/// Grains per parallel work unit of the first pass, a multiple of `REDUCTION_CHUNK`.
-const FIRST_PASS_CHUNK: usize = 4096;
-
-/// What the first pass does to every moving grain of a chunk.
-#[derive(Clone, Copy)]
-struct FirstKick {
-    /// Fraction of the step the first kick covers, times the step, s.
-    kick: f64,
-    /// The time step, s.
-    dt: f64,
-    /// Gravity, m/s².
-    gravity: DVec3,
-    /// Whether spins are kicked.
-    rotate: bool,
-}
-
-impl FirstKick {
-    /// One chunk of grains in one loop, each grain read once: kicked and drifted (when
-    /// `moves`: v += a·dt·F/m, x += dt·v, and ω += a·dt·T/I when rotation is integrated),
-    /// wrapped, and put into its row of the snapshot (when `rows`). Returns the gravity
-    /// work over the drift, Σ m g·Δx (exact for a uniform field), of each part of `part`
-    /// grains, each summed in grain order, and what the copy found. One loop, not one per
-    /// task: separate loops over a chunk read its columns again from the cache, and a
-    /// 512,000-grain packing's from memory (a chunk short enough to stay in cache ends
-    /// each stream before the hardware's prefetch has caught up with it).
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
-    #[inline(never)]
-    fn chunk(
-        self,
-        moves: bool,
-        frozen: bool,
-        wrap: Option<&PlainWrap>,
-        part: usize,
-        (p, v, w): (&mut [Position], &mut [Velocity], &mut [AngularVelocity]),
-        (f, t, m, i, r, mat): (
-            &[Force],
-            &[Torque],
-            &[Mass],
-            &[MomentOfInertia],
-            &[Radius],
-            &[MaterialId],
-        ),
-        rows: Option<SnapshotRows>,
-    ) -> FirstPassChunk {
-        let n = p.len();
-        let (v, w, f, t, m, i, r, mat) = (
-            &mut v[..n],
-            &mut w[..n],
-            &f[..n],
-            &t[..n],
-            &m[..n],
-            &i[..n],
-            &r[..n],
-            &mat[..n],
-        );
-        let step = Self {
-            rotate: moves && self.rotate,
-            ..self
-        };
-        let columns = (&mut *v, &mut *w, f, t, m, i, r, mat);
-        // Two loops, with and without the copy, so that neither tests for it per grain.
-        match rows {
-            Some(rows) => {
-                let (work, found) = step.pass::<true>(moves, frozen, wrap, part, p, columns, rows);
-                (work, Some(found))
-            }
-            None => {
-                let rows = SnapshotRows::none();
-                (
-                    step.pass::<false>(moves, frozen, wrap, part, p, columns, rows)
-                        .0,
-                    None,
-                )
-            }
-        }
-    }
-
-    /// The loop of [`Self::chunk`], with the copy into `rows` when `COPY`. A plain loop
-    /// over locals: the copy's running maxima and moves stay in registers.
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
-    #[inline(always)]
-    fn pass<const COPY: bool>(
-        self,
-        moves: bool,
-        frozen: bool,
-        wrap: Option<&PlainWrap>,
-        part: usize,
-        p: &mut [Position],
-        (v, w, f, t, m, i, r, mat): (
-            &mut [Velocity],
-            &mut [AngularVelocity],
-            &[Force],
-            &[Torque],
-            &[Mass],
-            &[MomentOfInertia],
-            &[Radius],
-            &[MaterialId],
-        ),
-        mut rows: SnapshotRows,
-    ) -> (SmallVec<[f64; 16]>, ChunkMoves) {
-        let Self {
-            kick,
-            dt,
-            gravity,
-            rotate,
-        } = self;
-        let n = p.len();
-        let mut found = rows.found();
-        let mut work = SmallVec::new();
-        let mut start = 0;
-        while start < n {
-            let end = (start + part).min(n);
-            // The same start as `Iterator::sum`'s.
-            let mut sum: f64 = std::iter::empty::<f64>().sum();
-            for g in start..end {
-                let (mut position, mut velocity) = (p[g].0, v[g].0);
-                if moves {
-                    velocity += f[g].0 * (kick / m[g].0);
-                    let dx = velocity * dt;
-                    position += dx;
-                    sum += m[g].0 * gravity.dot(dx);
-                    v[g].0 = velocity;
-                }
-                if rotate {
-                    w[g].0 += t[g].0 * (kick / i[g].0);
-                }
-                if let Some(wrap) = wrap {
-                    wrap.apply(&mut position);
-                }
-                p[g].0 = position;
-                if COPY {
-                    // A frozen grain resists like an infinite mass (a zero inverse): a
-                    // contact's reduced mass is then the moving grain's own (as LAMMPS
-                    // does for frozen atoms).
-                    let record = GrainRecord {
-                        position,
-                        radius: r[g].0,
-                        velocity,
-                        inverse_mass: if frozen { 0.0 } else { 1.0 / m[g].0 },
-                    };
-                    rows.put(&mut found, g, record, w[g].0, mat[g].0);
-                }
-            }
-            if moves {
-                work.push(sum);
-            }
-            start = end;
-        }
-        (work, found.finish())
-    }
-}
-
-/// The step's first pass over the grains, chunk by chunk while each chunk is in cache:
-/// the first kick, v += a·dt·F/m (and ω += a·dt·T/I when rotation is integrated), the
-/// drift x += dt·v with the work of gravity over it, m g·Δx (exact for a uniform field),
-/// the wrap into an unsheared periodic box, and the copy of every grain into the step's
-/// [`GrainSnapshot`] (records, spins, materials, the largest radius and the moves since the
-/// neighbour list's reference), which [`crate::snapshot::gather_snapshot`] would otherwise make in a pass
-/// of its own: one read of the grains' state instead of four (kick and drift, spin kick,
-/// wrap, copy). Frozen grains are copied and wrapped, never moved. The same operations in
-/// the same order as the separate passes, so the same state and sums to the bit.
-///
-/// The copy is left to [`crate::snapshot::gather_snapshot`] when a sheared box's wrap follows this pass
-/// (it moves grains after it), or when some grain lacks a column this pass reads.
-#[allow(clippy::too_many_arguments)]
-pub fn kick_drift_snapshot(
+/// First kick and drift: v += a·dt·F/m, then x += dt·v. Also accumulates the work of
+/// gravity over the drift, m g·Δx, which is exact for a uniform field.
+#[allow(clippy::type_complexity)]
+pub fn kick_drift_translation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
-    periodic: Option<Res<PeriodicBox>>,
     mut ledger: ResMut<EnergyLedger>,
-    mut snapshot: ResMut<GrainSnapshot>,
-    mut grains: FirstPassQuery,
-    every_grain: Query<(), With<Grain>>,
-    switch: Option<Res<SnapshotInFirstPass>>,
+    mut grains: Query<
+        (&mut Position, &mut Velocity, &Force, &Mass),
+        (With<Grain>, Without<Frozen>),
+    >,
 ) {
     let dt = clock.pass_dt;
-    let kick = config.integrator.kick_before_drift() * dt;
-    let step = FirstKick {
-        kick,
-        dt,
-        gravity: config.gravity,
-        rotate: config.rotation && kick != 0.0,
-    };
-    let box_ = periodic.map(|p| *p);
-    let sheared = box_.is_some_and(|b| b.shear.is_some());
-    let wrap = box_.filter(|_| !sheared).map(PlainWrap::new);
-    let n: usize = grains
-        .contiguous_iter()
-        .expect("grain query is dense")
-        .map(|(e, ..)| e.len())
-        .sum();
-    let copies = !sheared && n == every_grain.iter().len() && switch.is_none_or(|switch| switch.0);
-    let s = &mut *snapshot;
-    s.set_periodic(box_);
-    let mut copy = copies.then(|| s.begin_copy(n));
-    // Each chunk's gravity work and what its copy found, in chunk order (the snapshot's
-    // scratch list: no allocation a step).
-    let mut partials = s.take_first_pass_scratch();
-    let mut gravity_work = 0.0;
-    for (e, (mut p, mut v, mut w), (f, t, m, i), (r, mat, frozen)) in
-        grains.contiguous_iter_mut().expect("grain query is dense")
-    {
-        let (p, v, w) = (
-            p.bypass_change_detection(),
-            v.bypass_change_detection(),
-            w.bypass_change_detection(),
-        );
-        // Nothing moves in the priming pass, nor a frozen grain ever.
-        let moves = dt != 0.0 && !frozen;
-        // Large tables in fixed chunks in parallel, the gravity work summed per part of
-        // `REDUCTION_CHUNK` grains and the parts' sums in order (the same on any number of
-        // threads); small tables whole, their gravity work in one sum.
-        let (len, part) = if p.len() >= PARALLEL_THRESHOLD {
-            (FIRST_PASS_CHUNK, REDUCTION_CHUNK)
-        } else {
-            (p.len().max(1), p.len().max(1))
-        };
-        let rows = copy.as_mut().map(|copy| copy.table(s, e));
-        let chunk = |from: usize,
-                     grains: (&mut [Position], &mut [Velocity], &mut [AngularVelocity]),
-                     rows: Option<SnapshotRows>| {
-            let to = from + grains.0.len();
-            let columns = (
-                &f[from..to],
-                &t[from..to],
-                &m[from..to],
-                &i[from..to],
-                &r[from..to],
-                &mat[from..to],
-            );
-            step.chunk(moves, frozen, wrap.as_ref(), part, grains, columns, rows)
-        };
-        partials.clear();
-        let grain_chunks = p
-            .par_chunks_mut(len)
-            .zip(v.par_chunks_mut(len))
-            .zip(w.par_chunks_mut(len))
-            .enumerate();
-        match rows {
-            Some(rows) => partials.par_extend(
-                grain_chunks
-                    .zip(rows.chunks(len))
-                    .map(|((c, ((p, v), w)), (_, rows))| chunk(c * len, (p, v, w), Some(rows))),
-            ),
-            None => partials
-                .par_extend(grain_chunks.map(|(c, ((p, v), w))| chunk(c * len, (p, v, w), None))),
-        }
-        if moves {
-            gravity_work += partials.iter().flat_map(|(work, _)| work).sum::<f64>();
-        }
-        if let Some(copy) = &mut copy {
-            copy.chunk_results
-                .extend(partials.drain(..).filter_map(|(_, found)| found));
-            copy.add_chunk_results(s);
-        }
+    if dt == 0.0 {
+        return;
     }
-    s.put_first_pass_scratch(partials);
-    if let Some(copy) = copy {
-        s.first_pass_copied(copy);
+    let kick = config.integrator.kick_before_drift() * dt;
+    let g = config.gravity;
+    let mut gravity_work = 0.0;
+    for (mut p, mut v, f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        let p = p.bypass_change_detection();
+        let v = v.bypass_change_detection();
+        let update = |((p, v), (f, m)): ((&mut Position, &mut Velocity), (&Force, &Mass))| {
+            v.0 += f.0 * (kick / m.0);
+            let dx = v.0 * dt;
+            p.0 += dx;
+            m.0 * g.dot(dx)
+        };
+        gravity_work += if p.len() >= PARALLEL_THRESHOLD {
+            let partial: Vec<f64> = p
+                .par_chunks_mut(REDUCTION_CHUNK)
+                .zip(v.par_chunks_mut(REDUCTION_CHUNK))
+                .zip(
+                    f.par_chunks(REDUCTION_CHUNK)
+                        .zip(m.par_chunks(REDUCTION_CHUNK)),
+                )
+                .map(|((p, v), (f, m))| {
+                    p.iter_mut()
+                        .zip(v.iter_mut())
+                        .zip(f.iter().zip(m.iter()))
+                        .map(update)
+                        .sum::<f64>()
+                })
+                .collect();
+            partial.iter().sum::<f64>()
+        } else {
+            p.iter_mut()
+                .zip(v.iter_mut())
+                .zip(f.iter().zip(m.iter()))
+                .map(update)
+                .sum::<f64>()
+        };
     }
     ledger.gravity_work += gravity_work;
+}
+
+/// First rotational kick: ω += a·dt·T/I (spheres need no orientation for contact physics).
+#[allow(clippy::type_complexity)]
+pub fn first_kick_rotation(
+    config: Res<SimConfig>,
+    clock: Res<Clock>,
+    mut grains: Query<
+        (&mut AngularVelocity, &Torque, &MomentOfInertia),
+        (With<Grain>, Without<Frozen>),
+    >,
+) {
+    let kick = config.integrator.kick_before_drift() * clock.pass_dt;
+    if kick == 0.0 {
+        return;
+    }
+    for (mut w, t, i) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        let w = w.bypass_change_detection();
+        let update = |(w, (t, i)): (&mut AngularVelocity, (&Torque, &MomentOfInertia))| {
+            w.0 += t.0 * (kick / i.0);
+        };
+        if w.len() >= PARALLEL_THRESHOLD {
+            // Chunks, each a plain loop: rayon's per-item plumbing costs more than a kick.
+            w.par_chunks_mut(PARALLEL_THRESHOLD)
+                .zip(
+                    t.par_chunks(PARALLEL_THRESHOLD)
+                        .zip(i.par_chunks(PARALLEL_THRESHOLD)),
+                )
+                .for_each(|(w, (t, i))| w.iter_mut().zip(t.iter().zip(i)).for_each(update));
+        } else {
+            w.iter_mut().zip(t.iter().zip(i.iter())).for_each(update);
+        }
+    }
 }
 
 /// Adds m·g to every grain's force (the contact stage has already overwritten it).

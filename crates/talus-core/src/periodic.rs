@@ -248,54 +248,34 @@ impl ImageLanes {
     }
 }
 
-/// The wrap of an unsheared box as the passes over the grains apply it: one test of all
-/// axes at once for the grains inside the box (almost all after a step; an axis that does
-/// not wrap has infinite bounds), the full rule ([`PeriodicBox::wrap`]) for the others.
-#[derive(Clone, Copy, Debug)]
-pub struct PlainWrap {
-    box_: PeriodicBox,
-    lo: DVec3,
-    hi: DVec3,
-}
-
-impl PlainWrap {
-    /// The wrap of `box_` (its shear, if any, ignored).
-    pub fn new(box_: PeriodicBox) -> Self {
-        let bound = |a: usize, value: f64, open: f64| if box_.axes[a] { value } else { open };
-        Self {
-            box_,
-            lo: DVec3::from_array(std::array::from_fn(|a| {
-                bound(a, box_.lo[a], f64::NEG_INFINITY)
-            })),
-            hi: DVec3::from_array(std::array::from_fn(|a| bound(a, box_.hi[a], f64::INFINITY))),
-        }
-    }
-
-    /// Brings `p` into the box; a position inside stays exactly where it is.
-    #[inline(always)]
-    pub fn apply(&self, p: &mut DVec3) {
-        let (lo, hi) = (self.lo, self.hi);
-        let inside = (p.x >= lo.x)
-            & (p.x < hi.x)
-            & (p.y >= lo.y)
-            & (p.y < hi.y)
-            & (p.z >= lo.z)
-            & (p.z < hi.z);
-        if !inside {
-            *p = self.box_.wrap(*p);
-        }
-    }
-}
-
-/// Wraps grain positions back into the periodic box after the drift (for the integrators
-/// whose first pass does not wrap them itself: see
-/// [`crate::integrate::kick_drift_snapshot`]).
+/// Wraps grain positions back into the periodic box after the drift.
 pub fn wrap_positions(periodic: Res<PeriodicBox>, mut grains: Query<&mut Position, With<Grain>>) {
-    let wrap = PlainWrap::new(*periodic);
+    let b = *periodic;
+    // Almost every grain is inside the box after a step: one test of all axes at once (an
+    // axis that does not wrap has infinite bounds), and the full rule for the others.
+    let lo = DVec3::from_array(std::array::from_fn(|a| {
+        if b.axes[a] {
+            b.lo[a]
+        } else {
+            f64::NEG_INFINITY
+        }
+    }));
+    let hi = DVec3::from_array(std::array::from_fn(|a| {
+        if b.axes[a] { b.hi[a] } else { f64::INFINITY }
+    }));
+    let inside = |p: DVec3| {
+        (p.x >= lo.x) & (p.x < hi.x) & (p.y >= lo.y) & (p.y < hi.y) & (p.z >= lo.z) & (p.z < hi.z)
+    };
     for mut p in grains.contiguous_iter_mut().expect("grain query is dense") {
         p.bypass_change_detection()
             .par_chunks_mut(4096)
-            .for_each(|chunk| chunk.iter_mut().for_each(|p| wrap.apply(&mut p.0)));
+            .for_each(|chunk| {
+                for p in chunk {
+                    if !inside(p.0) {
+                        p.0 = b.wrap(p.0);
+                    }
+                }
+            });
     }
 }
 

@@ -169,9 +169,16 @@ impl SimBuilder {
         } else {
             builder.add_system(
                 Stage::IntegratePositions,
-                first_pass_name(rotation, false),
-                integrate::kick_drift_snapshot,
+                "kick_drift_translation",
+                integrate::kick_drift_translation,
             );
+            if rotation {
+                builder.add_system(
+                    Stage::IntegratePositions,
+                    "kick_rotation",
+                    integrate::first_kick_rotation,
+                );
+            }
         }
         builder.add_system(
             Stage::IntegratePositions,
@@ -214,38 +221,21 @@ impl SimBuilder {
     /// Makes the simulation periodic along the box's flagged axes: positions are wrapped
     /// into the box after each drift, and pair separations take the nearest image. A box
     /// with Lees–Edwards shear gets the sheared wrap (which also advances the image
-    /// offset) after the first pass; an unsheared box is wrapped by the leapfrogs' first
-    /// pass itself ([`integrate::kick_drift_snapshot`], renamed in the plan to say so), and
-    /// after the Gear predictor by a pass of its own.
+    /// offset) instead of the plain one.
     pub fn periodic(&mut self, box_: crate::periodic::PeriodicBox) {
         self.world.insert_resource(box_);
-        let config = self.config();
-        let (gear, rotation) = (
-            config.integrator == crate::resources::Integrator::Gear,
-            config.rotation,
-        );
         if box_.shear.is_some() {
             self.add_system(
                 Stage::IntegratePositions,
                 "wrap_positions_lees_edwards",
                 crate::periodic::wrap_positions_sheared,
             );
-        } else if gear {
+        } else {
             self.add_system(
                 Stage::IntegratePositions,
                 "wrap_positions",
                 crate::periodic::wrap_positions,
             );
-        } else {
-            let (unwrapped, wrapped) = (
-                first_pass_name(rotation, false),
-                first_pass_name(rotation, true),
-            );
-            for (_, systems) in &mut self.plan.stages {
-                for name in systems.iter_mut().filter(|name| *name == unwrapped) {
-                    *name = wrapped.to_string();
-                }
-            }
         }
     }
 
@@ -327,17 +317,6 @@ impl SimBuilder {
 
 #[derive(Resource, Default)]
 struct SlotCounts([u16; 10]);
-
-/// The plan's name of the leapfrogs' first pass ([`integrate::kick_drift_snapshot`]): what
-/// it does, rotation and the wrap only when it does them.
-fn first_pass_name(rotation: bool, wrap: bool) -> &'static str {
-    match (rotation, wrap) {
-        (false, false) => "kick_translation_drift_snapshot",
-        (true, false) => "kick_translation_rotation_drift_snapshot",
-        (false, true) => "kick_translation_drift_wrap_snapshot",
-        (true, true) => "kick_translation_rotation_drift_wrap_snapshot",
-    }
-}
 
 fn mark_stage(stage: Stage) -> impl FnMut(ResMut<StageTimings>) {
     move |mut timings: ResMut<StageTimings>| {

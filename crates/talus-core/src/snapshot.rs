@@ -136,19 +136,7 @@ pub struct GrainSnapshot {
     /// What each chunk of [`gather_snapshot`]'s copy found (scratch, kept for its
     /// allocation).
     chunk_scratch: Vec<ChunkMoves>,
-    /// Whether the grain arrays already hold this step's state, copied by the step's
-    /// first pass ([`crate::integrate::kick_drift_snapshot`]); [`gather_snapshot`] then
-    /// copies only the walls, and clears it.
-    grains_current: bool,
-    /// Whether that copy found the dense order of grains changed.
-    reordered_by_first_pass: bool,
-    /// The first pass's per-chunk results (scratch, kept for its allocation).
-    first_pass_scratch: Vec<FirstPassChunk>,
 }
-
-/// What one chunk of the first pass found: the gravity work of each of its parts, and what
-/// its copy into the snapshot found when it made one.
-pub(crate) type FirstPassChunk = (SmallVec<[f64; 16]>, Option<ChunkMoves>);
 
 impl GrainSnapshot {
     /// Number of grains.
@@ -349,7 +337,7 @@ impl BlockMoves {
 /// The grains' displacements since a reference: the largest length, and the box that
 /// bounds them ([`GrainSnapshot::move_bound_sq`]).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Moves {
+struct Moves {
     /// Largest |Δ|², m².
     largest_sq: f64,
     /// Componentwise least Δ, m (+∞ with no grain).
@@ -366,7 +354,7 @@ impl Default for Moves {
 
 impl Moves {
     /// No displacement yet.
-    pub(crate) fn still() -> Self {
+    fn still() -> Self {
         Self {
             largest_sq: 0.0,
             low: DVec3::splat(f64::INFINITY),
@@ -376,7 +364,7 @@ impl Moves {
 
     /// Adds one grain's displacement.
     #[inline(always)]
-    pub(crate) fn add(&mut self, d: DVec3) {
+    fn add(&mut self, d: DVec3) {
         self.largest_sq = self.largest_sq.max(d.length_squared());
         self.low = self.low.min(d);
         self.high = self.high.max(d);
@@ -413,7 +401,7 @@ impl Moves {
 
 /// The nearest image of the difference `d` of two positions ([`GrainSnapshot::separation`]).
 #[inline(always)]
-pub(crate) fn nearest_separation(
+fn nearest_separation(
     periodic: &Option<crate::periodic::PeriodicBox>,
     image: &crate::periodic::NearestImage,
     d: DVec3,
@@ -518,353 +506,25 @@ impl Default for LinePrefetcher {
 /// Grains per parallel work unit of the snapshot's copies.
 const COPY_CHUNK: usize = 4096;
 
-/// What one chunk of a copy into the snapshot found: its largest radius and the moves of
+/// Copies one component's values into a snapshot array, in parallel chunks.
+fn copy_column<T: Sync, U: Send>(dst: &mut [U], src: &[T], value: impl Fn(&T) -> U + Sync) {
+    // Chunks, each a plain loop: rayon's per-item plumbing costs more than a copy.
+    dst.par_chunks_mut(COPY_CHUNK)
+        .zip(src.par_chunks(COPY_CHUNK))
+        .for_each(|(d, x)| {
+            for (d, x) in d.iter_mut().zip(x) {
+                *d = value(x);
+            }
+        });
+}
+
+/// What one chunk of [`gather_snapshot`]'s copy found: its largest radius and the moves of
 /// each block of grains (by index) it holds a part of (a chunk of `COPY_CHUNK` grains not
 /// aligned on the blocks touches `COPY_CHUNK / MOVE_BLOCK + 1` of them; more spill to the
 /// heap).
-pub(crate) type ChunkMoves = (f64, SmallVec<[(usize, Moves); 20]>);
+type ChunkMoves = (f64, SmallVec<[(usize, Moves); 20]>);
 
-/// One table's columns of grain state, or a chunk of them, as the snapshot copies them.
-pub(crate) struct GrainColumns<'a> {
-    /// Positions.
-    pub position: &'a [Position],
-    /// Velocities.
-    pub velocity: &'a [Velocity],
-    /// Angular velocities.
-    pub omega: &'a [AngularVelocity],
-    /// Radii.
-    pub radius: &'a [Radius],
-    /// Masses.
-    pub mass: &'a [Mass],
-    /// Materials.
-    pub material: &'a [MaterialId],
-    /// Whether the table's grains are frozen (`Frozen` is a table component, so a table's
-    /// grains are all frozen or none is).
-    pub frozen: bool,
-}
-
-impl GrainColumns<'_> {
-    /// The columns from grain `from` of the table on.
-    #[inline]
-    pub(crate) fn from(&self, from: usize) -> GrainColumns<'_> {
-        GrainColumns {
-            position: &self.position[from..],
-            velocity: &self.velocity[from..],
-            omega: &self.omega[from..],
-            radius: &self.radius[from..],
-            mass: &self.mass[from..],
-            material: &self.material[from..],
-            frozen: self.frozen,
-        }
-    }
-}
-
-/// Where one table's grains go in the snapshot ([`GrainCopy::table`]), or a chunk of it.
-pub(crate) struct SnapshotRows<'a> {
-    pub(crate) records: &'a mut [GrainRecord],
-    pub(crate) omega: &'a mut [DVec3],
-    pub(crate) material: &'a mut [u16],
-    /// The reference positions of the rows' grains (empty when moves are not tracked).
-    pub(crate) reference: &'a [DVec3],
-    /// Dense index of the first row.
-    pub(crate) first: usize,
-    pub(crate) periodic: Option<crate::periodic::PeriodicBox>,
-    pub(crate) image: crate::periodic::NearestImage,
-}
-
-impl<'a> SnapshotRows<'a> {
-    /// The rows split into chunks of `len` rows, in order, each with its offset from the
-    /// first row.
-    pub(crate) fn chunks(
-        self,
-        len: usize,
-    ) -> impl IndexedParallelIterator<Item = (usize, SnapshotRows<'a>)> {
-        let (periodic, image, first, reference) =
-            (self.periodic, self.image, self.first, self.reference);
-        self.records
-            .par_chunks_mut(len)
-            .zip(self.omega.par_chunks_mut(len))
-            .zip(self.material.par_chunks_mut(len))
-            .enumerate()
-            .map(move |(c, ((records, omega), material))| {
-                let from = c * len;
-                let rows = SnapshotRows {
-                    reference: reference.get(from..from + records.len()).unwrap_or(&[]),
-                    records,
-                    omega,
-                    material,
-                    first: first + from,
-                    periodic,
-                    image,
-                };
-                (from, rows)
-            })
-    }
-
-    /// Copies the grains of `src` (as many as there are rows) into the rows, and returns
-    /// their largest radius and the moves of each block of grains they hold a part of.
-    pub(crate) fn copy(mut self, src: &GrainColumns) -> ChunkMoves {
-        let n = self.records.len();
-        // A frozen grain resists like an infinite mass (a zero inverse): a contact's
-        // reduced mass is then the moving grain's own (as LAMMPS does for frozen atoms).
-        let frozen = src.frozen;
-        let mut found = self.found();
-        for (g, (((p, r), (v, m)), (w, id))) in src.position[..n]
-            .iter()
-            .zip(&src.radius[..n])
-            .zip(src.velocity[..n].iter().zip(&src.mass[..n]))
-            .zip(src.omega[..n].iter().zip(&src.material[..n]))
-            .enumerate()
-        {
-            let record = GrainRecord {
-                position: p.0,
-                radius: r.0,
-                velocity: v.0,
-                inverse_mass: if frozen { 0.0 } else { 1.0 / m.0 },
-            };
-            self.put(&mut found, g, record, w.0, id.0);
-        }
-        found.finish()
-    }
-
-    /// No rows: for a pass that copies nothing.
-    pub(crate) fn none() -> Self {
-        SnapshotRows {
-            records: &mut [],
-            omega: &mut [],
-            material: &mut [],
-            reference: &[],
-            first: 0,
-            periodic: None,
-            image: Default::default(),
-        }
-    }
-
-    /// What the rows' grains have found so far: nothing.
-    #[inline]
-    pub(crate) fn found(&self) -> RowsFound {
-        RowsFound {
-            largest_radius: 0.0,
-            blocks: SmallVec::new(),
-            block: self.first / MOVE_BLOCK,
-            moves: Moves::still(),
-            track: !self.reference.is_empty(),
-            started: false,
-        }
-    }
-
-    /// Writes row `g` (the grain's record, spin and material) and adds the grain's radius
-    /// and its move since the reference to `found`: the largest radius and the moves are
-    /// taken in the same pass as the copy (a second pass would read every record again
-    /// for a few numbers). Rows are to be put in order.
-    #[inline(always)]
-    pub(crate) fn put(
-        &mut self,
-        found: &mut RowsFound,
-        g: usize,
-        record: GrainRecord,
-        omega: DVec3,
-        material: u16,
-    ) {
-        self.records[g] = record;
-        self.omega[g] = omega;
-        self.material[g] = material;
-        found.largest_radius = found.largest_radius.max(record.radius);
-        if found.track {
-            // Neither a table nor a chunk need start at a block's start.
-            let block = (self.first + g) / MOVE_BLOCK;
-            if block != found.block {
-                found.blocks.push((found.block, found.moves));
-                found.block = block;
-                found.moves = Moves::still();
-            }
-            found.moves.add(nearest_separation(
-                &self.periodic,
-                &self.image,
-                record.position - self.reference[g],
-            ));
-            found.started = true;
-        }
-    }
-}
-
-/// What the grains put into some rows of the snapshot ([`SnapshotRows::put`]) have shown
-/// so far: their largest radius and their moves, block by block.
-pub(crate) struct RowsFound {
-    largest_radius: f64,
-    /// The moves of the blocks done.
-    blocks: SmallVec<[(usize, Moves); 20]>,
-    /// The block of the last grain put.
-    block: usize,
-    /// Its moves so far.
-    moves: Moves,
-    /// Whether moves are measured (the rows have reference positions).
-    track: bool,
-    /// Whether a grain's move has been added.
-    started: bool,
-}
-
-impl RowsFound {
-    /// The largest radius and each block's moves.
-    pub(crate) fn finish(mut self) -> ChunkMoves {
-        if self.started {
-            self.blocks.push((self.block, self.moves));
-        }
-        (self.largest_radius, self.blocks)
-    }
-}
-
-/// A copy of the grains into the snapshot in progress, table by table in query order
-/// ([`GrainSnapshot::begin_copy`], [`Self::table`], [`Self::add_chunk_results`],
-/// [`GrainSnapshot::finish_copy`]).
-pub(crate) struct GrainCopy {
-    /// Whether the dense order of grains differs from the last copy's.
-    reordered: bool,
-    /// Whether the moves since the reference are measured (the reference has one position
-    /// per grain).
-    track_moves: bool,
-    /// The blocks' moves, merged (the snapshot's scratch list: no allocation a step).
-    block_moves: Vec<Moves>,
-    /// Dense index of the next table's first grain.
-    next: usize,
-    /// What the chunks of the current table found (the snapshot's scratch list).
-    pub chunk_results: Vec<ChunkMoves>,
-}
-
-impl GrainCopy {
-    /// Enters one table's entities (the next `entities.len()` grains in dense order) and
-    /// returns the snapshot rows its grains go to.
-    pub(crate) fn table<'a>(
-        &mut self,
-        s: &'a mut GrainSnapshot,
-        entities: &[Entity],
-    ) -> SnapshotRows<'a> {
-        let range = self.next..self.next + entities.len();
-        self.next = range.end;
-        // Unchanged entities (the common case) need no copy.
-        if self.reordered || s.entity[range.clone()] != *entities {
-            self.reordered = true;
-            s.entity[range.clone()].copy_from_slice(entities);
-        }
-        SnapshotRows {
-            reference: if self.track_moves {
-                &s.move_reference[range.clone()]
-            } else {
-                &[]
-            },
-            records: &mut s.records[range.clone()],
-            omega: &mut s.omega[range.clone()],
-            material: &mut s.material[range.clone()],
-            first: range.start,
-            periodic: s.periodic,
-            image: s.image,
-        }
-    }
-
-    /// Takes in what the current table's chunks found (maxima and minima: the same on
-    /// any number of threads).
-    pub(crate) fn add_chunk_results(&mut self, s: &mut GrainSnapshot) {
-        for (largest_radius, blocks) in self.chunk_results.drain(..) {
-            s.max_radius = s.max_radius.max(largest_radius);
-            for (block, moves) in blocks {
-                self.block_moves[block] = self.block_moves[block].merge(moves);
-            }
-        }
-    }
-}
-
-impl GrainSnapshot {
-    /// Starts a copy of `n` grains into the snapshot, reusing its allocations.
-    pub(crate) fn begin_copy(&mut self, n: usize) -> GrainCopy {
-        let reordered = self.entity.len() != n;
-        self.entity.resize(n, Entity::PLACEHOLDER);
-        self.records.resize(n, GrainRecord::default());
-        self.omega.resize(n, DVec3::ZERO);
-        self.material.resize(n, 0);
-        self.max_radius = 0.0;
-        // The moves since the reference are taken in the copy pass when the reference has
-        // one position per grain (a reordering found by the copy voids it).
-        let track_moves = self.move_reference.len() == n;
-        let mut block_moves = std::mem::take(&mut self.block_scratch);
-        block_moves.clear();
-        if track_moves {
-            block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
-        }
-        let mut chunk_results = std::mem::take(&mut self.chunk_scratch);
-        chunk_results.clear();
-        GrainCopy {
-            reordered,
-            track_moves,
-            block_moves,
-            next: 0,
-            chunk_results,
-        }
-    }
-
-    /// Ends a copy: the moves of the packing and of its blocks, and the dense index of
-    /// each entity when the order changed. Returns whether it did.
-    pub(crate) fn finish_copy(&mut self, copy: GrainCopy) -> bool {
-        let GrainCopy {
-            reordered,
-            track_moves,
-            block_moves,
-            chunk_results,
-            ..
-        } = copy;
-        self.moves = block_moves
-            .iter()
-            .fold(Moves::still(), |all, block| all.merge(*block));
-        self.block_moves.clear();
-        self.block_moves
-            .extend(block_moves.iter().map(Moves::block));
-        self.block_scratch = block_moves;
-        self.chunk_scratch = chunk_results;
-        if !track_moves || reordered {
-            self.move_reference.clear();
-        }
-        if reordered {
-            let max_index = self.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
-            self.dense_of.clear();
-            self.dense_of.resize(max_index + 1, NO_INDEX);
-            for (i, e) in self.entity.iter().enumerate() {
-                self.dense_of[e.index_u32() as usize] = i as u32;
-            }
-        }
-        reordered
-    }
-
-    /// The first pass's scratch list of per-chunk results, empty.
-    pub(crate) fn take_first_pass_scratch(&mut self) -> Vec<FirstPassChunk> {
-        let mut scratch = std::mem::take(&mut self.first_pass_scratch);
-        scratch.clear();
-        scratch
-    }
-
-    /// Gives the scratch list back for the next step.
-    pub(crate) fn put_first_pass_scratch(&mut self, scratch: Vec<FirstPassChunk>) {
-        self.first_pass_scratch = scratch;
-    }
-
-    /// Ends the copy of the step's first pass ([`crate::integrate::kick_drift_snapshot`]):
-    /// the broad phase's [`gather_snapshot`] then copies only the walls.
-    pub(crate) fn first_pass_copied(&mut self, copy: GrainCopy) {
-        self.reordered_by_first_pass = self.finish_copy(copy);
-        self.grains_current = true;
-    }
-
-    /// Declares the grain arrays out of date with the components: the next
-    /// [`gather_snapshot`] copies every grain. A system that changes a grain's position,
-    /// velocity, spin, radius, mass or material after the first pass of the step
-    /// ([`crate::integrate::kick_drift_snapshot`], which also copies the grains) and
-    /// before the broad phase calls it.
-    pub fn mark_grains_stale(&mut self) {
-        self.grains_current = false;
-    }
-}
-
-/// Copies grain and wall state into the snapshot, reusing its allocations. The grains
-/// are copied unless the step's first pass ([`crate::integrate::kick_drift_snapshot`])
-/// already did.
+/// Copies grain and wall state into the snapshot, reusing its allocations.
 #[allow(clippy::type_complexity)]
 pub fn gather_snapshot(
     mut snapshot: ResMut<GrainSnapshot>,
@@ -886,38 +546,132 @@ pub fn gather_snapshot(
 ) {
     let s = &mut *snapshot;
     s.set_periodic(periodic.map(|p| *p));
-    let reordered = if std::mem::take(&mut s.grains_current) {
-        std::mem::take(&mut s.reordered_by_first_pass)
-    } else {
-        let n: usize = grains
-            .contiguous_iter()
-            .expect("grain query is dense")
-            .map(|(e, ..)| e.len())
-            .sum();
-        let mut copy = s.begin_copy(n);
-        for (e, position, velocity, omega, radius, mass, material, frozen) in
-            grains.contiguous_iter().expect("grain query is dense")
-        {
-            let columns = GrainColumns {
-                position,
-                velocity,
-                omega,
-                radius,
-                mass,
-                material,
-                frozen,
-            };
-            let rows = copy.table(s, e);
-            // Chunks, each a plain loop: rayon's per-item plumbing costs more than a copy.
-            // Kept between steps for its allocation; extended in chunk order.
-            copy.chunk_results.par_extend(
-                rows.chunks(COPY_CHUNK)
-                    .map(|(from, rows)| rows.copy(&columns.from(from))),
-            );
-            copy.add_chunk_results(s);
+    let n: usize = grains
+        .contiguous_iter()
+        .expect("grain query is dense")
+        .map(|(e, ..)| e.len())
+        .sum();
+    let mut reordered = s.entity.len() != n;
+    s.entity.resize(n, Entity::PLACEHOLDER);
+    s.records.resize(n, GrainRecord::default());
+    s.omega.resize(n, DVec3::ZERO);
+    s.material.resize(n, 0);
+    // Each table's slice of every array is filled in parallel (plain copies: the result
+    // does not depend on the thread count).
+    let mut k = 0;
+    s.max_radius = 0.0;
+    // The moves since the reference are taken in the copy pass when the reference has one
+    // position per grain (a reordering found below voids it).
+    let track_moves = s.move_reference.len() == n;
+    // The blocks' moves are merged in the snapshot's scratch list (no allocation a step).
+    let mut block_moves = std::mem::take(&mut s.block_scratch);
+    let mut chunk_results = std::mem::take(&mut s.chunk_scratch);
+    block_moves.clear();
+    if track_moves {
+        block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
+    }
+    let (periodic_box, image) = (s.periodic, s.image);
+    for (e, p, v, w, r, m, mat, frozen) in grains.contiguous_iter().expect("grain query is dense") {
+        let table_start = k;
+        let range = k..k + e.len();
+        k += e.len();
+        // Unchanged entities (the common case) need no copy.
+        if reordered || s.entity[range.clone()] != *e {
+            reordered = true;
+            s.entity[range.clone()].copy_from_slice(e);
         }
-        s.finish_copy(copy)
-    };
+        let (records, omega, material) = (
+            &mut s.records[range.clone()],
+            &mut s.omega[range.clone()],
+            &mut s.material[range.clone()],
+        );
+        let reference: &[DVec3] = if track_moves {
+            &s.move_reference[range]
+        } else {
+            &[]
+        };
+        chunk_results.clear();
+        rayon::join(
+            || {
+                // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
+                // copy. The largest radius and the moves are taken in the same
+                // pass (a second pass would read every record again for one number).
+                // Kept between steps for its allocation; extended in chunk order.
+                chunk_results.par_extend(records.par_chunks_mut(COPY_CHUNK).enumerate().map(
+                    |(c, records)| {
+                        let from = c * COPY_CHUNK;
+                        let to = from + records.len();
+                        let sources = p[from..to]
+                            .iter()
+                            .zip(&r[from..to])
+                            .zip(v[from..to].iter().zip(&m[from..to]));
+                        // A frozen grain resists like an infinite mass (a zero inverse):
+                        // a contact's reduced mass is then the moving grain's own (as
+                        // LAMMPS does for frozen atoms). `Frozen` is a table component, so
+                        // a table's grains are all frozen or none is.
+                        let inverse_mass = |m: &Mass| if frozen { 0.0 } else { 1.0 / m.0 };
+                        for (record, ((p, r), (v, m))) in records.iter_mut().zip(sources) {
+                            *record = GrainRecord {
+                                position: p.0,
+                                radius: r.0,
+                                velocity: v.0,
+                                inverse_mass: inverse_mass(m),
+                            };
+                        }
+                        let largest_radius = r[from..to]
+                            .iter()
+                            .fold(0.0, |largest, r| f64::max(largest, r.0));
+                        // The moves of each block of grains (by dense index) this chunk
+                        // holds a part of; a table need not start at a block's start.
+                        let mut blocks = SmallVec::new();
+                        if track_moves {
+                            let mut from = from;
+                            while from < to {
+                                let block = (table_start + from) / MOVE_BLOCK;
+                                let end = ((block + 1) * MOVE_BLOCK - table_start).min(to);
+                                let mut moves = Moves::still();
+                                for (p, q) in p[from..end].iter().zip(&reference[from..end]) {
+                                    moves.add(nearest_separation(&periodic_box, &image, p.0 - *q));
+                                }
+                                blocks.push((block, moves));
+                                from = end;
+                            }
+                        }
+                        (largest_radius, blocks)
+                    },
+                ));
+            },
+            || {
+                copy_column(omega, w, |x| x.0);
+                copy_column(material, mat, |x| x.0);
+            },
+        );
+        // Maxima and minima: the same on any number of threads.
+        for (largest_radius, blocks) in chunk_results.drain(..) {
+            s.max_radius = s.max_radius.max(largest_radius);
+            for (block, moves) in blocks {
+                block_moves[block] = block_moves[block].merge(moves);
+            }
+        }
+    }
+    s.moves = block_moves
+        .iter()
+        .fold(Moves::still(), |all, block| all.merge(*block));
+    s.block_moves.clear();
+    s.block_moves.extend(block_moves.iter().map(Moves::block));
+    s.block_scratch = block_moves;
+    s.chunk_scratch = chunk_results;
+    if !track_moves || reordered {
+        s.move_reference.clear();
+    }
+    if reordered {
+        let max_index = s.entity.iter().map(|e| e.index_u32()).max().unwrap_or(0) as usize;
+        s.dense_of.clear();
+        s.dense_of.resize(max_index + 1, NO_INDEX);
+        for (i, e) in s.entity.iter().enumerate() {
+            s.dense_of[e.index_u32() as usize] = i as u32;
+        }
+    }
     let walls_changed = s.walls.len() != walls.iter().len()
         || s.walls
             .iter()
