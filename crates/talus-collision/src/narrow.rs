@@ -5,8 +5,10 @@
 //!
 //! The candidate pairs of a chunk of grains come in increasing order of their gap at the
 //! neighbour list's build, so those that may be within reach are a prefix of the list,
-//! tested four at a time in lanes with no regard for which grain they belong to. Only the
-//! touching pairs look at a grain's contacts (to tell new pairs from live ones). Which
+//! tested four at a time in lanes with no regard for which grain they belong to. A pair
+//! that has a live contact is not tested: a bit per candidate pair, set while it has one,
+//! masks it out (four such pairs in a row are not even read), and only the touching pairs
+//! without a bit look at a grain's contacts (to tell new pairs from live ones). Which
 //! contacts may end is not found by testing every live contact again: the force loops
 //! list those that carried no force ([`IdleContacts`]), and only those are tested.
 
@@ -26,10 +28,16 @@ use talus_core::snapshot::GrainSnapshot;
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, CandidateChunk, NeighbourList};
 
-/// The live contacts entered under one grain. Three fit inline (12 bytes each, 48 bytes
-/// with the length): in a dense packing a grain is the first body of two or three
-/// contacts, and a list on the heap costs a cache miss at every pass.
-type GrainContacts = SmallVec<[IndexEntry; 3]>;
+/// The live contacts entered under one grain. Two fit inline (16 bytes each, 40 bytes
+/// with the length). The narrow phase's pair tests do not read these lists (the live bits
+/// of [`ContactIndex`] stand for them), so a grain with more, whose list is on the heap,
+/// costs a cache miss only where a contact starts, ends or moves in its table; a third
+/// inline entry would cost 8 bytes a grain.
+type GrainContacts = SmallVec<[IndexEntry; 2]>;
+
+/// The slot of a contact whose pair is not among the neighbour list's candidates (a grain
+/// and a wall).
+const NO_SLOT: u32 = u32::MAX;
 
 /// One live contact as seen from its first body.
 #[derive(Clone, Copy, Debug)]
@@ -37,18 +45,30 @@ struct IndexEntry {
     /// The second body: its dense index, or its wall code ([`ContactBodies::wall_code`]).
     partner: u32,
     /// The contact entity's bits ([`Entity::to_bits`]) in two halves: an `Entity` is
-    /// aligned to 8 bytes, which would pad the entry to 16 and the inline list to 56.
+    /// aligned to 8 bytes, which would leave four bytes of padding.
     contact: [u32; 2],
+    /// The pair's place in its chunk of the neighbour list ([`CandidateChunk`]), whose
+    /// live bit ([`ContactIndex::live`]) the entry holds set; [`NO_SLOT`] if none.
+    slot: u32,
 }
 
 impl IndexEntry {
     #[inline]
-    fn new(partner: u32, contact: Entity) -> Self {
-        let bits = contact.to_bits();
-        Self {
+    fn new(partner: u32, contact: Entity, slot: u32) -> Self {
+        let mut entry = Self {
             partner,
-            contact: [bits as u32, (bits >> 32) as u32],
-        }
+            contact: [0; 2],
+            slot,
+        };
+        entry.set_contact(contact);
+        entry
+    }
+
+    /// Points the entry at another contact entity of the same pair.
+    #[inline]
+    fn set_contact(&mut self, contact: Entity) {
+        let bits = contact.to_bits();
+        self.contact = [bits as u32, (bits >> 32) as u32];
     }
 
     /// The contact entity.
@@ -78,8 +98,20 @@ pub struct ContactIndex {
     /// Contacts restored from a saved state before the snapshot knew their bodies' dense
     /// indices: (first body, second body, contact), entered at the next pass.
     pending: Vec<(Entity, Entity, Entity)>,
-    /// Per chunk of grains: the touching pairs that have no contact yet (scratch).
-    new_pairs: Vec<Vec<(u32, u32)>>,
+    /// Per chunk of grains, one bit per candidate pair of the neighbour list's chunk, set
+    /// while the pair has a live contact (whose entry holds the pair's slot). The narrow
+    /// phase neither tests nor looks up those pairs: the force loop evaluates their
+    /// contacts, and which of them end is decided from the contacts that carried no force
+    /// ([`IdleContacts`]). In the chute, one pair tested in six has a contact; in the
+    /// neighbour list's order (by gap at the build) they come in runs.
+    live: Vec<Vec<u64>>,
+    /// The neighbour-list build ([`NeighbourList::builds`]) whose pairs the slots and
+    /// live bits refer to; `None` when they must be derived again (the index re-keyed,
+    /// contacts entered from a saved state).
+    live_build: Option<u64>,
+    /// Per chunk of grains: the touching pairs that have no contact yet, with their slots
+    /// in the chunk's candidates (scratch).
+    new_pairs: Vec<Vec<(u32, u32, u32)>>,
     /// Spawn every new contact and despawn every ended one, instead of handing ended
     /// contacts to new pairs of their law (off by default; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
@@ -147,13 +179,21 @@ impl ContactIndex {
             for entry in self.per_grain.iter().flatten() {
                 match new_codes(entry.contact()) {
                     Some((key, partner)) => {
-                        rekeyed[key as usize].push(IndexEntry { partner, ..*entry });
+                        rekeyed[key as usize].push(IndexEntry::new(
+                            partner,
+                            entry.contact(),
+                            NO_SLOT,
+                        ));
                     }
                     None => orphans.push(entry.contact()),
                 }
             }
             self.per_grain = rekeyed;
             self.layout = s.layout;
+            self.live_build = None;
+        }
+        if !self.pending.is_empty() {
+            self.live_build = None;
         }
         for (a, b, contact) in std::mem::take(&mut self.pending) {
             let partner = s
@@ -163,7 +203,7 @@ impl ContactIndex {
             match (s.dense(a), partner) {
                 (Some(d), Some(partner)) => {
                     let (key, partner) = first_in_order(d as u32, partner);
-                    self.per_grain[key as usize].push(IndexEntry::new(partner, contact));
+                    self.per_grain[key as usize].push(IndexEntry::new(partner, contact, NO_SLOT));
                 }
                 _ => orphans.push(contact),
             }
@@ -223,10 +263,23 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain,
         new_pairs,
+        live,
+        live_build,
         ..
     } = index;
     if new_pairs.len() < chunks {
         new_pairs.resize_with(chunks, Vec::new);
+    }
+    if *live_build != Some(list.builds) || live.len() < chunks {
+        // A new list (or a re-keyed index): each contact's pair is found among its
+        // chunk's candidates once, here, and its bit set.
+        live.resize_with(chunks, Vec::new);
+        per_grain
+            .par_chunks_mut(CHUNK)
+            .zip(list.chunks[..chunks].par_iter())
+            .zip(live[..chunks].par_iter_mut())
+            .for_each(|((entries, candidates), bits)| mark_live(entries, candidates, bits));
+        *live_build = Some(list.builds);
     }
     // Each chunk of grains owns its slice of the index: the overlap tests and the listing
     // of new pairs run in parallel; only spawning and despawning entities, which change
@@ -236,11 +289,12 @@ fn update_contacts_inner(
         .par_chunks(CHUNK)
         .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
+        .zip(live[..chunks].par_iter())
         .enumerate()
         // Chunks differ in cost (dense and dilute regions, the frozen base): small jobs,
         // which idle threads steal, even the threads' shares out.
         .with_max_len(2)
-        .for_each(|(chunk, ((entries, candidates), new))| {
+        .for_each(|(chunk, (((entries, candidates), new), live))| {
             let pass_state = PassState {
                 s,
                 table,
@@ -253,7 +307,9 @@ fn update_contacts_inner(
             let mut ahead = talus_core::snapshot::LinePrefetcher::new();
             let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
             if !next.is_empty() {
-                ahead.add(&per_grain_view[next.clone()]);
+                // The gaps first: the search for the chunk's tested prefix reads them
+                // in a chain of dependent loads.
+                ahead.add(&list.chunks[chunk + 1].gap);
                 ahead.add(&s.records[next]);
             }
             narrow_chunk(
@@ -261,6 +317,7 @@ fn update_contacts_inner(
                 chunk * CHUNK,
                 entries,
                 candidates,
+                live,
                 new,
                 &mut ahead,
             );
@@ -281,6 +338,7 @@ fn update_contacts_inner(
                 };
                 if !keep {
                     ended.push(e.contact());
+                    set_live(live, key, e.slot, false);
                 }
                 keep
             });
@@ -293,7 +351,9 @@ fn update_contacts_inner(
             }
             let entries = &mut per_grain[key as usize];
             if let Some(k) = entries.iter().position(|e| e.partner == partner) {
-                ended.push(entries.remove(k).contact());
+                let entry = entries.remove(k);
+                ended.push(entry.contact());
+                set_live(live, key as usize, entry.slot, false);
             }
         }
     }
@@ -337,10 +397,11 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain,
         new_pairs,
+        live,
         ..
     } = index;
     let mut reused = vec![false; ended_at.len()];
-    let mut to_spawn: Vec<(u32, u32, Contact, &LawSlot)> = Vec::new();
+    let mut to_spawn: Vec<(u32, u32, u32, Contact, &LawSlot)> = Vec::new();
     // A new contact knows its bodies' places in this step's snapshot, which the force loop
     // reads next: its first evaluation goes through the law's lane form like any other.
     let bodies_of = |i: u32, j: u32| ContactBodies {
@@ -348,7 +409,7 @@ fn update_contacts_inner(
         b: j,
         layout: s.layout,
     };
-    for &(i, j) in new_pairs[..chunks].iter().flatten() {
+    for &(i, j, slot) in new_pairs[..chunks].iter().flatten() {
         let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
             let wall = &s.walls[k];
             (wall.entity, wall.material, ContactKind::GrainWall)
@@ -359,7 +420,7 @@ fn update_contacts_inner(
                 ContactKind::GrainGrain,
             )
         };
-        let slot = table
+        let law = table
             .get(s.material[i as usize], material_b)
             .expect("the parallel pass kept only interacting pairs");
         // The grain first in dense order is `a` (never the entity ids, which depend on
@@ -368,20 +429,21 @@ fn update_contacts_inner(
             a: s.entity[i as usize],
             b,
             kind,
-            pair_slot: slot.pair_slot,
+            pair_slot: law.pair_slot,
         };
         let group = reusable
             .iter_mut()
-            .find(|g| g.archetype == slot.archetype && g.next < g.end);
+            .find(|g| g.archetype == law.archetype && g.next < g.end);
         if let Some(group) = group {
             let contact = ended_at[group.next].2;
             reused[group.next] = true;
             group.next += 1;
             group.reuses.push((contact, pair, bodies_of(i, j)));
-            group.recycle = Some(slot.recycle);
-            per_grain[i as usize].push(IndexEntry::new(j, contact));
+            group.recycle = Some(law.recycle);
+            per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
+            set_live(live, i as usize, slot, true);
         } else {
-            to_spawn.push((i, j, pair, slot));
+            to_spawn.push((i, j, slot, pair, law));
         }
     }
     for group in &reusable {
@@ -405,9 +467,10 @@ fn update_contacts_inner(
     for &(_, c) in &removals {
         world.despawn(c);
     }
-    for (i, j, pair, slot) in to_spawn {
-        let contact = (slot.spawn)(world, pair, bodies_of(i, j));
-        per_grain[i as usize].push(IndexEntry::new(j, contact));
+    for (i, j, slot, pair, law) in to_spawn {
+        let contact = (law.spawn)(world, pair, bodies_of(i, j));
+        per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
+        set_live(live, i as usize, slot, true);
     }
     if world
         .resource::<Clock>()
@@ -469,10 +532,47 @@ pub fn sort_contacts(world: &mut World, index: &mut ContactIndex, s: &GrainSnaps
             .get_mut(key as usize)
             .and_then(|list| list.iter_mut().find(|e| e.partner == partner))
         {
-            *entry = IndexEntry::new(partner, contact);
+            entry.set_contact(contact);
         }
     }
     moved
+}
+
+/// Finds each contact of a chunk of grains among the chunk's candidate pairs: sets the
+/// pair's live bit and enters its slot in the contact's entry (a contact whose pair is not
+/// a candidate gets [`NO_SLOT`]).
+fn mark_live(entries: &mut [GrainContacts], candidates: &CandidateChunk, live: &mut Vec<u64>) {
+    live.clear();
+    live.resize(candidates.len().div_ceil(64), 0);
+    for entry in entries.iter_mut().flatten() {
+        entry.slot = NO_SLOT;
+    }
+    let pairs = candidates.local.iter().zip(&candidates.partner);
+    for (slot, (&local, &partner)) in pairs.enumerate() {
+        if let Some(entry) = entries[local as usize]
+            .iter_mut()
+            .find(|e| e.partner == partner)
+        {
+            entry.slot = slot as u32;
+            live[slot / 64] |= 1 << (slot % 64);
+        }
+    }
+}
+
+/// Sets or clears the live bit of the candidate pair at `slot` of grain `key`'s chunk
+/// (nothing for [`NO_SLOT`]).
+#[inline]
+fn set_live(live: &mut [Vec<u64>], key: usize, slot: u32, on: bool) {
+    if slot == NO_SLOT {
+        return;
+    }
+    let (word, bit) = (slot as usize / 64, slot % 64);
+    let bits = &mut live[key / CHUNK][word];
+    if on {
+        *bits |= 1 << bit;
+    } else {
+        *bits &= !(1 << bit);
+    }
 }
 
 /// What every chunk of the narrow phase's parallel pass reads.
@@ -507,17 +607,19 @@ const PARTNERS_AHEAD: usize = 32;
 
 /// The narrow phase on one chunk of grains (first grain `base`): tests the candidate
 /// pairs that may be within reach (a prefix of the chunk's pairs, which come in
-/// increasing order of their gap at the build) four at a time, and each grain against
-/// each wall, and lists in `new` the touching pairs that have no contact yet, ordered by
-/// grain, then partner (walls last), whatever the order of the tests. Not inlined, so
-/// that profiles show it.
+/// increasing order of their gap at the build) and have no live contact (their bits in
+/// `live` clear) four at a time, and each grain against each wall, and lists in `new`
+/// the touching pairs that have no contact yet, ordered by grain, then partner (walls
+/// last), whatever the order of the tests. Not inlined, so that profiles show it.
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 fn narrow_chunk(
     state: &PassState,
     base: usize,
     entries: &[GrainContacts],
     candidates: &CandidateChunk,
-    new: &mut Vec<(u32, u32)>,
+    live: &[u64],
+    new: &mut Vec<(u32, u32, u32)>,
     ahead: &mut talus_core::snapshot::LinePrefetcher,
 ) {
     let PassState {
@@ -531,10 +633,12 @@ fn narrow_chunk(
     // frozen grain and a wall, moves nothing, and its reduced mass (hence a mass-scaled
     // dashpot) would be infinite: none is made.
     let frozen = |i: usize| s.inverse_mass(i) == 0.0;
-    // The partner's material is looked up only for a pair with no contact yet: most
-    // touching pairs have one, and the materials are an array of their own, which a
-    // large packing's partners would each miss in cache.
-    let mut touch = |i: usize, partner: u32| {
+    // A touching pair reaches here only without a live bit, so it has no contact as long
+    // as the bits are exact; the look-up in the grain's contacts stays, for walls and as
+    // a guard. The partner's material is looked up only for a pair with no contact: the
+    // materials are an array of their own, which a large packing's partners would each
+    // miss in cache.
+    let mut touch = |i: usize, partner: u32, slot: u32| {
         let known = entries[i - base].iter().any(|e| e.partner == partner);
         if !known {
             let material_b = match ContactBodies::wall_of(partner) {
@@ -542,13 +646,10 @@ fn narrow_chunk(
                 None => s.material[partner as usize],
             };
             if table.get(s.material[i], material_b).is_some() {
-                new.push((i as u32, partner));
+                new.push((i as u32, partner, slot));
             }
         }
     };
-    // The pairs come in no order of their grains: bring the chunk's contact lists (12 KB)
-    // in ahead, in order, instead of waiting for memory at the first touch of each.
-    talus_core::snapshot::prefetch_all(entries);
     let tested = candidates.within_threshold(gap_threshold);
     let (local, partner) = (&candidates.local[..tested], &candidates.partner[..tested]);
     // Four pairs at a time where the separation is the plain nearest image (the same bits
@@ -556,7 +657,11 @@ fn narrow_chunk(
     let image = (!s.is_sheared()).then(|| s.image_lanes());
     let grains = s.reader();
     let range4 = F4::splat(range);
-    let mut test = |i: [usize; 4], j: [u32; 4], live: u32| {
+    // The live bits of the four pairs from `first` (a multiple of four, so within a word).
+    let live_four = |first: usize| (live[first / 64] >> (first % 64)) as u32 & 0xF;
+    let mut test = |i: [usize; 4], j: [u32; 4], first: usize, untested: u32| {
+        // The lanes to look at: pairs neither padding nor with a contact.
+        let wanted = 0xF & !(untested | live_four(first));
         let mut within = if let Some(image) = &image {
             let (a, b) = (grains.gather4(i), grains.gather4(j.map(|j| j as usize)));
             let reach = a.radius + b.radius + range4;
@@ -570,13 +675,13 @@ fn narrow_chunk(
                 .map(|l| u32::from(touching(s, range, i[l], j[l])) << l)
                 .sum()
         };
-        within &= live;
+        within &= wanted;
         while within != 0 {
             let l = within.trailing_zeros() as usize;
             within &= within - 1;
             let (i, j) = (i[l], j[l]);
             if !(frozen(i) && frozen(j as usize)) {
-                touch(i, j);
+                touch(i, j, (first + l) as u32);
             }
         }
     };
@@ -592,7 +697,16 @@ fn narrow_chunk(
         for &j in partner.iter().skip(4 * q + PARTNERS_AHEAD).take(4) {
             talus_core::snapshot::prefetch_item(&s.records, j as usize);
         }
-        test(four_local.map(|l| base + l as usize), four_partner, 0xF);
+        // Four pairs that all have contacts are not even read.
+        if live_four(4 * q) == 0xF {
+            continue;
+        }
+        test(
+            four_local.map(|l| base + l as usize),
+            four_partner,
+            4 * q,
+            0,
+        );
     }
     if !local_rest.is_empty() {
         // The last pairs, with the first of them repeated in the lanes left over.
@@ -600,7 +714,8 @@ fn narrow_chunk(
         test(
             std::array::from_fn(|l| base + local_rest[pad(l)] as usize),
             std::array::from_fn(|l| partner_rest[pad(l)]),
-            (1 << local_rest.len()) - 1,
+            local.len() - local_rest.len(),
+            0xF & !((1 << local_rest.len()) - 1),
         );
     }
     if !s.walls.is_empty() {
@@ -611,7 +726,7 @@ fn narrow_chunk(
             for w in 0..s.walls.len() {
                 let code = ContactBodies::wall_code(w);
                 if touching(s, range, i, code) {
-                    touch(i, code);
+                    touch(i, code, NO_SLOT);
                 }
             }
         }
