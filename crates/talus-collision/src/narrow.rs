@@ -657,11 +657,28 @@ fn narrow_chunk(
     let image = (!s.is_sheared()).then(|| s.image_lanes());
     let grains = s.reader();
     let range4 = F4::splat(range);
-    // The live bits of the four pairs from `first` (a multiple of four, so within a word).
-    let live_four = |first: usize| (live[first / 64] >> (first % 64)) as u32 & 0xF;
-    let mut test = |i: [usize; 4], j: [u32; 4], first: usize, untested: u32| {
-        // The lanes to look at: pairs neither padding nor with a contact.
-        let wanted = 0xF & !(untested | live_four(first));
+    // One loop over groups of four pairs, the last padded with its first pair repeated
+    // in the lanes left over: the test is written once, inlined in the loop.
+    for first in (0..tested).step_by(4) {
+        ahead.step(2);
+        // A chunk's pairs reach grains all over the packing, beyond a core's own cache at
+        // any size worth timing (the records of 32,000 grains are 2 MB): ask for the
+        // records of the pairs a few batches ahead.
+        for &j in partner.iter().skip(first + PARTNERS_AHEAD).take(4) {
+            talus_core::snapshot::prefetch_item(&s.records, j as usize);
+        }
+        // The lanes to look at: pairs that are neither padding nor with a contact (their
+        // live bits, four from a multiple of four, so within a word). Four pairs that all
+        // have contacts are not even read.
+        let padding = 0xF_u32 << (tested - first).min(4) & 0xF;
+        let live_four = (live[first / 64] >> (first % 64)) as u32 & 0xF;
+        let wanted = 0xF & !(padding | live_four);
+        if wanted == 0 {
+            continue;
+        }
+        let pair = |l: usize| (first + l).min(tested - 1);
+        let i: [usize; 4] = std::array::from_fn(|l| base + local[pair(l)] as usize);
+        let j: [u32; 4] = std::array::from_fn(|l| partner[pair(l)]);
         let mut within = if let Some(image) = &image {
             let (a, b) = (grains.gather4(i), grains.gather4(j.map(|j| j as usize)));
             let reach = a.radius + b.radius + range4;
@@ -684,39 +701,6 @@ fn narrow_chunk(
                 touch(i, j, (first + l) as u32);
             }
         }
-    };
-    let (locals, partners) = (local.chunks_exact(4), partner.chunks_exact(4));
-    let (local_rest, partner_rest) = (locals.remainder(), partners.remainder());
-    for (q, (four_local, four_partner)) in locals.zip(partners).enumerate() {
-        let four_local: [u8; 4] = four_local.try_into().expect("four pairs");
-        let four_partner: [u32; 4] = four_partner.try_into().expect("four pairs");
-        ahead.step(2);
-        // A chunk's pairs reach grains all over the packing, beyond a core's own cache at
-        // any size worth timing (the records of 32,000 grains are 2 MB): ask for the
-        // records of the pairs a few batches ahead.
-        for &j in partner.iter().skip(4 * q + PARTNERS_AHEAD).take(4) {
-            talus_core::snapshot::prefetch_item(&s.records, j as usize);
-        }
-        // Four pairs that all have contacts are not even read.
-        if live_four(4 * q) == 0xF {
-            continue;
-        }
-        test(
-            four_local.map(|l| base + l as usize),
-            four_partner,
-            4 * q,
-            0,
-        );
-    }
-    if !local_rest.is_empty() {
-        // The last pairs, with the first of them repeated in the lanes left over.
-        let pad = |l: usize| l.min(local_rest.len() - 1);
-        test(
-            std::array::from_fn(|l| base + local_rest[pad(l)] as usize),
-            std::array::from_fn(|l| partner_rest[pad(l)]),
-            local.len() - local_rest.len(),
-            0xF & !((1 << local_rest.len()) - 1),
-        );
     }
     if !s.walls.is_empty() {
         for i in base..base + entries.len() {
