@@ -633,14 +633,18 @@ fn narrow_chunk(
     // frozen grain and a wall, moves nothing, and its reduced mass (hence a mass-scaled
     // dashpot) would be infinite: none is made.
     let frozen = |i: usize| s.inverse_mass(i) == 0.0;
-    // A touching pair reaches here only without a live bit, so it has no contact as long
-    // as the bits are exact; the look-up in the grain's contacts stays, for walls and as
-    // a guard. The partner's material is looked up only for a pair with no contact: the
-    // materials are an array of their own, which a large packing's partners would each
-    // miss in cache.
+    // A touching candidate pair reaches here only without a live bit, so it has no
+    // contact (the bits are exact: `tests/neighbour_rebuild.rs`); a grain and a wall
+    // (no slot) are looked up in the grain's contacts. The partner's material is looked
+    // up only for a pair with no contact: the materials are an array of their own, which
+    // a large packing's partners would each miss in cache.
     let mut touch = |i: usize, partner: u32, slot: u32| {
-        let known = entries[i - base].iter().any(|e| e.partner == partner);
-        if !known {
+        let known = |partner| entries[i - base].iter().any(|e| e.partner == partner);
+        debug_assert!(
+            slot == NO_SLOT || !known(partner),
+            "a live pair without its bit"
+        );
+        if slot != NO_SLOT || !known(partner) {
             let material_b = match ContactBodies::wall_of(partner) {
                 Some(w) => s.walls[w].material,
                 None => s.material[partner as usize],
