@@ -23,7 +23,7 @@ use talus_contact::{
 };
 use talus_core::lanes::F4;
 use talus_core::resources::Clock;
-use talus_core::snapshot::GrainSnapshot;
+use talus_core::snapshot::{GrainSnapshot, prefetch_item};
 
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, CandidateChunk, NeighbourList};
@@ -344,7 +344,16 @@ fn update_contacts_inner(
             });
         }
     } else {
+        // The pairs' grains and contact lists are all over the packing: each pair asks
+        // for those of the pair a few ahead.
+        let mut ahead = idle.pairs.iter().skip(LISTS_AHEAD);
         for &[a, b] in &idle.pairs {
+            if let Some(&[a, b]) = ahead.next() {
+                let (key, partner) = first_in_order(a, b);
+                prefetch_item(per_grain, key as usize);
+                prefetch_item(&s.records, key as usize);
+                prefetch_item(&s.records, partner as usize);
+            }
             let (key, partner) = first_in_order(a, b);
             if touching(s, range, key as usize, partner) {
                 continue;
@@ -409,7 +418,11 @@ fn update_contacts_inner(
         b: j,
         layout: s.layout,
     };
+    let mut ahead = new_pairs[..chunks].iter().flatten().skip(LISTS_AHEAD);
     for &(i, j, slot) in new_pairs[..chunks].iter().flatten() {
+        if let Some(&(i, _, _)) = ahead.next() {
+            prefetch_item(per_grain, i as usize);
+        }
         let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
             let wall = &s.walls[k];
             (wall.entity, wall.material, ContactKind::GrainWall)
@@ -602,6 +615,10 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
     }
 }
 
+/// How many pairs ahead the serial loops over ended and new contacts ask for the grains'
+/// contact lists (and records).
+const LISTS_AHEAD: usize = 8;
+
 /// How many pairs ahead [`narrow_chunk`] asks for the partners' positions and radii.
 const PARTNERS_AHEAD: usize = 32;
 
@@ -669,7 +686,7 @@ fn narrow_chunk(
         // any size worth timing (the records of 32,000 grains are 2 MB): ask for the
         // records of the pairs a few batches ahead.
         for &j in partner.iter().skip(first + PARTNERS_AHEAD).take(4) {
-            talus_core::snapshot::prefetch_item(&s.records, j as usize);
+            prefetch_item(&s.records, j as usize);
         }
         // The lanes to look at: pairs that are neither padding nor with a contact (their
         // live bits, four from a multiple of four, so within a word). Four pairs that all
