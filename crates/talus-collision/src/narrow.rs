@@ -7,10 +7,11 @@
 //! neighbour list's build, so those that may be within reach are a prefix of the list,
 //! tested four at a time in lanes with no regard for which grain they belong to. A pair
 //! that has a live contact is not tested: a bit per candidate pair, set while it has one,
-//! masks it out (four such pairs in a row are not even read), and only the touching pairs
-//! without a bit look at a grain's contacts (to tell new pairs from live ones). Which
-//! contacts may end is not found by testing every live contact again: the force loops
-//! list those that carried no force ([`IdleContacts`]), and only those are tested.
+//! masks it out (four such pairs in a row are not even read), so a touching pair without
+//! a bit is new (only a grain and a wall, outside the list, are looked up in the grain's
+//! contacts). Which contacts may end is not found by testing every live contact again:
+//! the force loops list those that carried no force ([`IdleContacts`]), and only those
+//! are tested.
 
 use bevy_ecs::archetype::ArchetypeId;
 use bevy_ecs::prelude::*;
@@ -102,8 +103,8 @@ pub struct ContactIndex {
     /// while the pair has a live contact (whose entry holds the pair's slot). The narrow
     /// phase neither tests nor looks up those pairs: the force loop evaluates their
     /// contacts, and which of them end is decided from the contacts that carried no force
-    /// ([`IdleContacts`]). In the chute, one pair tested in six has a contact; in the
-    /// neighbour list's order (by gap at the build) they come in runs.
+    /// ([`IdleContacts`]). In the 32,000-grain chute about one pair in five of the tested
+    /// prefixes has a contact (16,000 of 76,000 a step).
     live: Vec<Vec<u64>>,
     /// The neighbour-list build ([`NeighbourList::builds`]) whose pairs the slots and
     /// live bits refer to; `None` when they must be derived again (the index re-keyed,
