@@ -438,18 +438,6 @@ pub fn prefetch_item<T>(data: &[T], i: usize) {
     }
 }
 
-/// Asks the processor to bring the whole of `data` into the cache, line by line in
-/// order, without waiting: for a loop about to read a small array in an order the
-/// hardware cannot follow (which would otherwise wait for memory at each first touch of a
-/// line).
-#[inline]
-pub fn prefetch_all<T>(data: &[T]) {
-    let start = data.as_ptr().cast::<u8>();
-    for offset in (0..std::mem::size_of_val(data)).step_by(64) {
-        prefetch_address(start.wrapping_add(offset));
-    }
-}
-
 /// Asks for a few slices' cache lines a few at a time, spread over a loop's iterations
 /// ([`Self::step`]): for data the loop after this one will read in an order the hardware
 /// cannot guess. (Asking for all of it at once would overflow the processor's queue of
