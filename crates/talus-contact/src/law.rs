@@ -287,24 +287,55 @@ fn spawn_contact<L: ContactLaw>(
 
 /// Hands ended contacts of law `L` (entities of its five-component archetype) to new
 /// pairs: each is left exactly as [`spawn_contact`] would have made it for its new pair.
+///
+/// The rows are written through the table's columns, found once, not looked up contact by
+/// contact: a query's `get_mut` finds the entity's archetype and each of five columns
+/// again for every contact (on the 32,000-grain chute, 105–165 ns a contact against
+/// 80–100 this way). No system reads the contacts' change ticks, so they are left alone,
+/// as the table sort leaves them.
 fn recycle_contacts<L: ContactLaw>(world: &mut World, reuses: &[(Entity, Contact, ContactBodies)]) {
+    let rows: Vec<usize> = reuses
+        .iter()
+        .map(|&(entity, ..)| world.entity(entity).location().table_row.index())
+        .collect();
     let mut contacts = world.query::<(
+        Entity,
         &mut Contact,
         &mut ContactGeometry,
         &mut ContactForce,
         &mut ContactBodies,
         &mut LawState<L::History>,
     )>();
-    for &(entity, pair, pair_bodies) in reuses {
-        let (mut contact, mut geometry, mut force, mut bodies, mut history) = contacts
-            .get_mut(world, entity)
-            .expect("the narrow phase recycles only contacts of the law's archetype");
-        *contact = pair;
-        *geometry = ContactGeometry::default();
-        *force = ContactForce::default();
-        *bodies = pair_bodies;
-        history.0 = L::History::default();
+    let mut recycled = 0;
+    for (entities, mut contact, mut geometry, mut force, mut bodies, mut history) in contacts
+        .query_mut(world)
+        .contiguous_iter_mut()
+        .expect("contact query is dense")
+    {
+        let (contact, geometry, force, bodies, history) = (
+            contact.bypass_change_detection(),
+            geometry.bypass_change_detection(),
+            force.bypass_change_detection(),
+            bodies.bypass_change_detection(),
+            history.bypass_change_detection(),
+        );
+        for (&(entity, pair, pair_bodies), &row) in reuses.iter().zip(&rows) {
+            if entities.get(row) != Some(&entity) {
+                continue;
+            }
+            contact[row] = pair;
+            geometry[row] = ContactGeometry::default();
+            force[row] = ContactForce::default();
+            bodies[row] = pair_bodies;
+            history[row].0 = L::History::default();
+            recycled += 1;
+        }
     }
+    assert_eq!(
+        recycled,
+        reuses.len(),
+        "the narrow phase recycles only contacts of the law's archetype"
+    );
 }
 
 /// Re-creates a saved contact of law `L`: its geometry and force of the last evaluation
