@@ -449,10 +449,10 @@ fn update_contacts_inner(
             .iter_mut()
             .find(|g| g.archetype == law.archetype && g.next < g.end);
         if let Some(group) = group {
-            let contact = ended_at[group.next].2;
+            let (_, row, contact) = ended_at[group.next];
             reused[group.next] = true;
             group.next += 1;
-            group.reuses.push((contact, pair, bodies_of(i, j)));
+            group.reuses.push((contact, row, pair, bodies_of(i, j)));
             group.recycle = Some(law.recycle);
             per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
             set_live(live, i as usize, slot, true);
@@ -503,8 +503,9 @@ struct Reusable {
     next: usize,
     /// One past the group's last ended contact.
     end: usize,
-    /// The ended contacts handed out, with their new pairs and the pairs' bodies.
-    reuses: Vec<(Entity, Contact, ContactBodies)>,
+    /// The ended contacts handed out, with their table rows, their new pairs and the
+    /// pairs' bodies.
+    reuses: Vec<(Entity, usize, Contact, ContactBodies)>,
     /// The law's recycling function, once a contact is handed out.
     recycle: Option<RecycleContacts>,
 }

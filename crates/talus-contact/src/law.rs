@@ -291,13 +291,13 @@ fn spawn_contact<L: ContactLaw>(
 /// The rows are written through the table's columns, found once, not looked up contact by
 /// contact: a query's `get_mut` finds the entity's archetype and each of five columns
 /// again for every contact (on the 32,000-grain chute, 105–165 ns a contact against
-/// 80–100 this way). No system reads the contacts' change ticks, so they are left alone,
-/// as the table sort leaves them.
-fn recycle_contacts<L: ContactLaw>(world: &mut World, reuses: &[(Entity, Contact, ContactBodies)]) {
-    let rows: Vec<usize> = reuses
-        .iter()
-        .map(|&(entity, ..)| world.entity(entity).location().table_row.index())
-        .collect();
+/// 80–100 this way). The rows are the caller's, checked against the table's entities. No
+/// system reads the contacts' change ticks, so they are left alone, as the table sort
+/// leaves them.
+fn recycle_contacts<L: ContactLaw>(
+    world: &mut World,
+    reuses: &[(Entity, usize, Contact, ContactBodies)],
+) {
     let mut contacts = world.query::<(
         Entity,
         &mut Contact,
@@ -319,7 +319,7 @@ fn recycle_contacts<L: ContactLaw>(world: &mut World, reuses: &[(Entity, Contact
             bodies.bypass_change_detection(),
             history.bypass_change_detection(),
         );
-        for (&(entity, pair, pair_bodies), &row) in reuses.iter().zip(&rows) {
+        for &(entity, row, pair, pair_bodies) in reuses {
             if entities.get(row) != Some(&entity) {
                 continue;
             }
@@ -638,7 +638,8 @@ mod tests {
         };
         e.get_mut::<LawState<u64>>().unwrap().0 = 41;
 
-        recycle_contacts::<Counting>(&mut world, &[(old, pair(2, 3, 1), bodies)]);
+        let row = world.entity(old).location().table_row.index();
+        recycle_contacts::<Counting>(&mut world, &[(old, row, pair(2, 3, 1), bodies)]);
         let spawned = spawn_contact::<Counting>(&mut world, pair(2, 3, 1), bodies);
         assert_eq!(components(&world, old), components(&world, spawned));
         assert_eq!(world.get::<Contact>(old).unwrap().a, grains[2]);

@@ -176,10 +176,10 @@ impl<A: Columns, B: Columns> Columns for (A, B) {
 /// Permutes `rows` in place so that row `r` of every column takes the old row
 /// `order[r]`, following each cycle of the permutation with swaps: no copy of a column
 /// (a gather into scratch columns was faster but raised the peak memory of a
-/// 512,000-grain run by 25 bytes a grain), a bit per row to mark the rows done. Between two sorts about a third of the rows changed pairs, so the
-/// cycles are few and long and jump across the table; the row [`AHEAD`] places further
-/// along the cycle is asked for ahead (`order` is small and cached, so walking it ahead
-/// is cheap).
+/// 512,000-grain run by 25 bytes a grain), a bit per row to mark the rows done. Between
+/// two sorts about a third of the rows changed pairs, so the cycles are few and long and
+/// jump across the table; the row [`AHEAD`] places further along the cycle is asked for
+/// ahead (`order` is small and cached, so walking it ahead is cheap).
 fn permute(order: &[u32], mut rows: impl Columns) {
     /// How many rows along a cycle are asked for ahead of the swap.
     const AHEAD: usize = 8;

@@ -25,8 +25,9 @@ pub const ENERGY_CHUNK_LEN: usize = 256;
 const FORCE_CHUNKS_PER_JOB: usize = 1;
 
 /// Gives ended contacts of one law to new pairs ([`LawSlot::recycle`]): each listed entity
-/// is overwritten with what a spawn would give its new pair (with the pair's bodies).
-pub type RecycleContacts = fn(&mut World, &[(Entity, Contact, ContactBodies)]);
+/// (with its row in its table, as the caller found it) is overwritten with what a spawn
+/// would give its new pair (with the pair's bodies).
+pub type RecycleContacts = fn(&mut World, &[(Entity, usize, Contact, ContactBodies)]);
 
 /// Whether the force loops use the laws' lane forms ([`ContactLaw::evaluate_lanes`])
 /// where a law has one: on unless this resource says otherwise. The results are the same
