@@ -149,14 +149,6 @@ pub struct ContactEnergyPartials {
     pub chunks: Vec<ContactEnergySums>,
 }
 
-/// Whether this step's contact forces and torques are already summed onto the grains'
-/// totals: on one thread, with a single law, the force loop adds each chunk's contacts
-/// while they are still in cache ([`crate::systems::evaluate_law`]), in the order
-/// [`crate::systems::apply_contact_forces`] would add them, which then leaves the totals as
-/// they are (and clears this).
-#[derive(Resource, Clone, Copy, Debug, Default)]
-pub struct GrainTotalsSummed(pub bool);
-
 /// The contacts that carried no force at their last evaluation
 /// ([`ContactForce::is_active`] false: the bodies had parted, and the law had booked the
 /// step in which they did), by their bodies' codes in the snapshot ([`ContactBodies`]

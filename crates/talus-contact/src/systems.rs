@@ -105,7 +105,6 @@ impl Plugin for ContactPlugin {
         });
         sim.world.insert_resource(ContactEnergyPartials::default());
         sim.world.insert_resource(IdleContacts::default());
-        sim.world.insert_resource(GrainTotalsSummed::default());
         sim.world
             .insert_resource(crate::order::ContactTableSorts::default());
         sim.add_system(
@@ -119,8 +118,6 @@ impl Plugin for ContactPlugin {
 /// Evaluates law `L` on all of its contacts in parallel, writing geometry, force and
 /// torques into each contact entity, and appending the contacts' energies, summed per
 /// chunk of [`ENERGY_CHUNK_LEN`] contacts in table order, to [`ContactEnergyPartials`].
-/// On one thread, when `L` is the only law with contacts, it also sums the forces and
-/// torques onto the grains' totals ([`GrainTotalsSummed`]).
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn evaluate_law<L: ContactLaw>(
     snapshot: Res<GrainSnapshot>,
@@ -131,8 +128,6 @@ pub fn evaluate_law<L: ContactLaw>(
     lane_forms: Option<Res<LaneForms>>,
     mut partials: ResMut<ContactEnergyPartials>,
     mut idle: ResMut<IdleContacts>,
-    sorts: Res<crate::order::ContactTableSorts>,
-    mut summed: ResMut<GrainTotalsSummed>,
     mut contacts: Query<(
         &Contact,
         &mut LawState<L::History>,
@@ -140,7 +135,6 @@ pub fn evaluate_law<L: ContactLaw>(
         &mut ContactForce,
         &mut ContactBodies,
     )>,
-    mut grains: Query<(&mut Force, &mut Torque), With<Grain>>,
 ) {
     let dt = clock.pass_dt;
     let snapshot = &*snapshot;
@@ -232,25 +226,6 @@ pub fn evaluate_law<L: ContactLaw>(
     let idle = &mut *idle;
     idle.layout = snapshot.layout;
     idle.evaluated = true;
-    // One thread and one law's contacts: sum each chunk onto the grains' totals right
-    // after its evaluation, in table order as `apply_contact_forces` would, so that its
-    // bodies and forces are not read from memory a second time.
-    let fuse = rayon::current_num_threads() == 1
-        && matches!(&sorts.0[..], [(law, _)] if *law == std::any::type_name::<L>());
-    summed.0 = fuse;
-    let mut totals = Vec::new();
-    if fuse {
-        let mut offset = 0;
-        for (f, t) in grains.contiguous_iter_mut().expect("grain query is dense") {
-            let f = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(f).0;
-            let t = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(t).0;
-            f.fill(Force(DVec3::ZERO));
-            t.fill(Torque(DVec3::ZERO));
-            let len = f.len();
-            totals.push((offset, f, t));
-            offset += len;
-        }
-    }
     let mut outcomes: Vec<(ContactEnergySums, Vec<[u32; 2]>)> = Vec::new();
     for (c, mut h, mut g, mut f, mut d) in contacts
         .contiguous_iter_mut()
@@ -260,25 +235,6 @@ pub fn evaluate_law<L: ContactLaw>(
         let g = g.bypass_change_detection();
         let f = f.bypass_change_detection();
         let d = d.bypass_change_detection();
-        if fuse {
-            let chunks = c
-                .chunks(ENERGY_CHUNK_LEN)
-                .zip(h.chunks_mut(ENERGY_CHUNK_LEN))
-                .zip(g.chunks_mut(ENERGY_CHUNK_LEN))
-                .zip(f.chunks_mut(ENERGY_CHUNK_LEN))
-                .zip(d.chunks_mut(ENERGY_CHUNK_LEN));
-            for ((((c, h), g), f), d) in chunks {
-                let t = &mut totals[..];
-                let (sums, pairs) = if book {
-                    evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d, t)
-                } else {
-                    evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d, t)
-                };
-                partials.push(to_global(sums));
-                idle.pairs.extend(pairs);
-            }
-            continue;
-        }
         // An indexed parallel iterator extends the list in chunk order.
         outcomes.clear();
         outcomes.par_extend(
@@ -289,11 +245,10 @@ pub fn evaluate_law<L: ContactLaw>(
                 .zip(d.par_chunks_mut(ENERGY_CHUNK_LEN))
                 .with_max_len(FORCE_CHUNKS_PER_JOB)
                 .map(|((((c, h), g), f), d)| {
-                    let t = &mut [];
                     let (sums, idle) = if book {
-                        evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d, t)
+                        evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d)
                     } else {
-                        evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d, t)
+                        evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d)
                     };
                     (to_global(sums), idle)
                 }),
@@ -322,7 +277,6 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
     g: &mut [ContactGeometry],
     f: &mut [ContactForce],
     d: &mut [ContactBodies],
-    totals: &mut [GrainTotals],
 ) -> (ContactEnergySums, Vec<[u32; 2]>) {
     let mut sums = ContactEnergySums::default();
     let n = c.len();
@@ -363,9 +317,6 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
             &c[k], &mut h[k], &mut g[k], &mut f[k], &mut d[k], &mut sums, BOOK,
         );
     }
-    for (first, force, torque) in totals.iter_mut() {
-        add_contact_sums(&[(&*d, &*f)], *first, force, torque);
-    }
     // The contacts that carried no force: the few the next narrow phase may end. (Every
     // contact is counted in `sums.active` or listed here.)
     let mut idle = Vec::new();
@@ -378,10 +329,6 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
     }
     (sums, idle)
 }
-
-/// A range of grains' force and torque totals, from the grain (in snapshot order) at its
-/// start: what [`evaluate_chunk`] sums its contacts onto when it does.
-type GrainTotals<'a> = (usize, &'a mut [Force], &'a mut [Torque]);
 
 /// The scalar evaluation of one contact (the force loop's closure): kinematics, the
 /// law's [`ContactLaw::evaluate`], the contact's components and the chunk's sums.
@@ -630,7 +577,6 @@ pub fn apply_contact_forces(
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
     mut partials: ResMut<ContactEnergyPartials>,
-    mut summed: ResMut<GrainTotalsSummed>,
     contacts: Query<(&ContactBodies, &ContactForce)>,
     mut grains: Query<(Entity, &mut Force, &mut Torque), With<Grain>>,
     mut walls: Query<(Entity, &mut WallLoad)>,
@@ -648,8 +594,7 @@ pub fn apply_contact_forces(
     // torque columns (in snapshot order) are split into one range per thread, and each
     // range's thread zeroes its range, reads every contact's body indices (written by the
     // force loop) and adds the forces of those that touch it ([`sum_range`]). Counts, the
-    // worst overlap and the energies come summed per chunk from the force loop. On one
-    // thread with one law the force loop has done the grains' sums already, alike.
+    // worst overlap and the energies come summed per chunk from the force loop.
     let tables: Vec<(&[ContactBodies], &[ContactForce])> = contacts
         .contiguous_iter()
         .expect("contact query is dense")
@@ -669,13 +614,9 @@ pub fn apply_contact_forces(
     }
     picked.resize_with(parts.len(), Vec::new);
     let pick = rayon::current_num_threads() > 1;
-    if !std::mem::take(&mut summed.0) {
-        parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
-            |((first, force, torque), picked)| {
-                sum_range(&tables, pick, first, force, torque, picked)
-            },
-        );
-    }
+    parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
+        |((first, force, torque), picked)| sum_range(&tables, pick, first, force, torque, picked),
+    );
     if !wall_force.is_empty() {
         for &(bodies, forces) in &tables {
             for (b, f) in bodies.iter().zip(forces) {
@@ -752,10 +693,6 @@ fn sum_range(
     let len = force.len();
     force.fill(Force(DVec3::ZERO));
     torque.fill(Torque(DVec3::ZERO));
-    if !pick {
-        add_contact_sums(tables, first, force, torque);
-        return;
-    }
     // Adds one side of a contact; `b_side` for the second body, whose force is opposite.
     let add = |force: &mut [Force],
                torque: &mut [Torque],
@@ -773,6 +710,27 @@ fn sum_range(
         }
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
+    if !pick {
+        for &(bodies, forces) in tables {
+            for (row, (b, f)) in bodies.iter().zip(forces).enumerate() {
+                // The table is in the order of its first bodies, so the first sides' totals
+                // are read in order; the second bodies' are not, and miss a core's own
+                // cache: ask for them a few contacts ahead.
+                if let Some(ahead) = bodies.get(row + SUM_AHEAD) {
+                    let j = (ahead.b as usize).wrapping_sub(first);
+                    prefetch_item(force, j);
+                    prefetch_item(torque, j);
+                }
+                if in_range(b.a) {
+                    add(force, torque, b, f, false);
+                }
+                if in_range(b.b) {
+                    add(force, torque, b, f, true);
+                }
+            }
+        }
+        return;
+    }
     // Two entries a contact at most, plus the one written past the last kept; blocks of
     // contacts keep the list small (no buffer that grows with the packing) and in cache.
     picked.resize(2 * PICK_BLOCK + 1, 0);
@@ -797,41 +755,6 @@ fn sum_range(
                 }
                 let row = (code >> 1) as usize;
                 add(force, torque, &bodies[row], &forces[row], code & 1 == 1);
-            }
-        }
-    }
-}
-
-/// Adds, in table order, the forces and torques of the contacts that touch grains
-/// `first..first + force.len()` (in snapshot order) to their totals: [`sum_range`] on one
-/// thread, and the force loop's own sums ([`GrainTotalsSummed`]).
-#[inline]
-fn add_contact_sums(
-    tables: &[(&[ContactBodies], &[ContactForce])],
-    first: usize,
-    force: &mut [Force],
-    torque: &mut [Torque],
-) {
-    let len = force.len();
-    for &(bodies, forces) in tables {
-        for (row, (b, f)) in bodies.iter().zip(forces).enumerate() {
-            // The table is in the order of its first bodies, so the first sides' totals
-            // are read in order; the second bodies' are not, and miss a core's own
-            // cache: ask for them a few contacts ahead.
-            if let Some(ahead) = bodies.get(row + SUM_AHEAD) {
-                let j = (ahead.b as usize).wrapping_sub(first);
-                prefetch_item(force, j);
-                prefetch_item(torque, j);
-            }
-            let i = (b.a as usize).wrapping_sub(first);
-            if i < len {
-                force[i].0 += f.force;
-                torque[i].0 += f.torque_a;
-            }
-            let j = (b.b as usize).wrapping_sub(first);
-            if j < len {
-                force[j].0 -= f.force;
-                torque[j].0 += f.torque_b;
             }
         }
     }
