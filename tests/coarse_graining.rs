@@ -252,7 +252,11 @@ fn love_weber_sum(sim: &mut Simulation) -> (Tensor, usize) {
                 }
                 l
             }
-            ContactKind::GrainWall => g.point - xa,
+            // From the centre to the middle of the overlap.
+            ContactKind::GrainWall => {
+                let ra = sim.world.get::<Radius>(c.a).unwrap().0;
+                -g.normal * (ra - 0.5 * g.overlap)
+            }
         };
         sum.add_outer(f.force, branch, 1.0);
     }

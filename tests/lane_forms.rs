@@ -45,7 +45,6 @@ fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> {
             let h = &h.0;
             let values = [
                 g.normal,
-                g.point,
                 f.force,
                 f.torque_a,
                 f.torque_b,
@@ -347,7 +346,7 @@ fn the_hertz_chute_flow_is_the_same_with_lanes() {
         let contacts: BTreeMap<(u64, u64), Vec<u64>> = q
             .iter(&sim.world)
             .map(|(c, g, f)| {
-                let values = [g.normal, g.point, f.force, f.torque_a, f.torque_b]
+                let values = [g.normal, f.force, f.torque_a, f.torque_b]
                     .iter()
                     .flat_map(|x| x.to_array())
                     .chain([g.overlap])

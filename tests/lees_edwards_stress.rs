@@ -125,7 +125,11 @@ fn branches(sim: &mut Simulation, shifts: &[(i32, DVec3)]) -> Vec<Branch> {
                 let (l, k) = nearest_image(a, b, shifts);
                 (a + l, k != 0)
             }
-            ContactKind::GrainWall => (g.point, false),
+            // The middle of the overlap.
+            ContactKind::GrainWall => {
+                let ra = sim.world.get::<Radius>(c.a).unwrap().0;
+                (a - g.normal * (ra - 0.5 * g.overlap), false)
+            }
         };
         out.push(Branch {
             force: f.force,

@@ -80,15 +80,32 @@ impl ContactBodies {
     }
 }
 
-/// Geometry of the last evaluation.
+/// Geometry of the last evaluation. The contact point is not stored (the force loop
+/// would write it at every step for the few readers that need it): [`Self::point`] gives
+/// it from grain `a`'s centre and radius.
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct ContactGeometry {
     /// Unit normal pointing from `b` towards `a`.
     pub normal: DVec3,
     /// Overlap δ = R_a + R_b − distance (walls: R_a − distance to plane), metres.
     pub overlap: f64,
-    /// Contact point (middle of the overlap).
-    pub point: DVec3,
+}
+
+impl ContactGeometry {
+    /// The contact point (the middle of the overlap) of this geometry for grain `a` with
+    /// centre `a_centre` and radius `a_radius`: `a`'s centre plus its branch vector
+    /// −n (R_a − δ/2), as the kinematics compute it ([`crate::ContactKinematics`]).
+    #[inline]
+    pub fn point(&self, a_centre: DVec3, a_radius: f64) -> DVec3 {
+        a_centre + self.branch_a(a_radius)
+    }
+
+    /// The branch vector of grain `a` (radius `a_radius`): from its centre to the contact
+    /// point, −n (R_a − δ/2).
+    #[inline]
+    pub fn branch_a(&self, a_radius: f64) -> DVec3 {
+        -self.normal * (a_radius - 0.5 * self.overlap)
+    }
 }
 
 /// Force and torques of the last evaluation.

@@ -624,7 +624,6 @@ mod tests {
         *e.get_mut::<ContactGeometry>().unwrap() = ContactGeometry {
             normal: DVec3::X,
             overlap: -1e-9,
-            point: DVec3::ONE,
         };
         *e.get_mut::<ContactForce>().unwrap() = ContactForce {
             force: DVec3::Y,

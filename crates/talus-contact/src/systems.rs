@@ -169,7 +169,6 @@ pub fn evaluate_law<L: ContactLaw>(
         *g = ContactGeometry {
             normal: kin.normal,
             overlap: kin.overlap,
-            point: kin.point,
         };
         *f = ContactForce {
             force: r.force,
@@ -437,11 +436,7 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
         }
         return;
     };
-    let (normal, overlap, point) = (
-        kin.normal.to_array(),
-        kin.overlap.to_array(),
-        kin.point.to_array(),
-    );
+    let (normal, overlap) = (kin.normal.to_array(), kin.overlap.to_array());
     let (force, torque_a, torque_b) =
         (r.force.to_array(), torque_a.to_array(), torque_b.to_array());
     let min_radius = kin.min_radius.to_array();
@@ -457,7 +452,6 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
         let (geometry, forces) = (&mut g[k], &mut f[k]);
         geometry.normal = normal[k];
         geometry.overlap = overlap[k];
-        geometry.point = point[k];
         forces.force = force[k];
         forces.torque_a = torque_a[k];
         forces.torque_b = torque_b[k];

@@ -261,7 +261,12 @@ fn log_contact_quantities(
             s.strips.push(strip_ends(
                 c,
                 g,
-                |e| world.get::<Position>(e).map(|p| p.0),
+                |e| {
+                    world
+                        .get::<Position>(e)
+                        .zip(world.get::<Radius>(e))
+                        .map(|(p, r)| (p.0, r.0))
+                },
                 periodic.as_ref(),
             ));
             let radius = world.get::<Radius>(c.a).map_or(0.0, |r| r.0);
@@ -392,23 +397,27 @@ fn log_grains(
 }
 
 /// The ends of a contact's strip: from the centre of `a` to that of the image of `b`
-/// nearest to it (across a periodic seam), or to the contact point for a wall. A
-/// contact's grain is always alive; a centre not found falls back on the contact point
-/// anyway, so that every contact gets its strip.
+/// nearest to it (across a periodic seam), or to the contact point for a wall.
+/// `body_of` gives a grain's centre and radius. A contact's grains are always alive; one
+/// not found would put that end at the contact point (or, for `a`, the origin), so that
+/// every contact still gets its strip.
 fn strip_ends(
     c: &Contact,
     g: &ContactGeometry,
-    centre_of: impl Fn(Entity) -> Option<DVec3>,
+    body_of: impl Fn(Entity) -> Option<(DVec3, f64)>,
     periodic: Option<&PeriodicBox>,
 ) -> [[f32; 3]; 2] {
-    let centre = |e: Entity| centre_of(e).unwrap_or(g.point);
-    let start = centre(c.a);
+    let (start, radius) = body_of(c.a).unwrap_or((DVec3::ZERO, 0.0));
+    let point = g.point(start, radius);
     let end = match c.kind {
-        ContactKind::GrainGrain => match periodic {
-            Some(b) => start - b.min_image(start - centre(c.b)),
-            None => centre(c.b),
-        },
-        ContactKind::GrainWall => g.point,
+        ContactKind::GrainGrain => {
+            let centre = body_of(c.b).map_or(point, |(centre, _)| centre);
+            match periodic {
+                Some(b) => start - b.min_image(start - centre),
+                None => centre,
+            }
+        }
+        ContactKind::GrainWall => point,
     };
     [to_f32(start), to_f32(end)]
 }
@@ -430,7 +439,7 @@ fn log_force_chains(
         s.strips.push(strip_ends(
             c,
             g,
-            |e| grains.get(e).ok().map(|(p, _, _)| p.0),
+            |e| grains.get(e).ok().map(|(p, _, r)| (p.0, r.0)),
             periodic,
         ));
         let normal_force = f.force.dot(g.normal).abs();

@@ -90,7 +90,10 @@ pub struct SavedContact {
     pub normal: DVec3,
     /// Overlap of the last evaluation, m.
     pub overlap: f64,
-    /// Contact point of the last evaluation, m.
+    /// Contact point of the last evaluation, m: derived (grain `a`'s centre plus its
+    /// branch vector, [`ContactGeometry::point`]), for readers of the file; optional, and
+    /// ignored on restore.
+    #[serde(default)]
     pub point: DVec3,
     /// Force on `a` of the last evaluation, N.
     pub force: DVec3,
@@ -268,7 +271,6 @@ pub fn restore_contacts(
         let geometry = ContactGeometry {
             normal: c.normal,
             overlap: c.overlap,
-            point: c.point,
         };
         let force = ContactForce {
             force: c.force,
@@ -286,7 +288,11 @@ pub fn restore_contacts(
 }
 
 /// Opens every binary state: "TALUS", "BS" for binary state, and the format version.
-const BINARY_MAGIC: [u8; 8] = *b"TALUSBS\x01";
+const BINARY_MAGIC: [u8; 8] = *b"TALUSBS\x02";
+
+/// The opening of format 1, still read: its contacts carry their contact point
+/// ([`ContactGeometryPartsWithPoint`]), which format 2 derives instead.
+const BINARY_MAGIC_1: [u8; 8] = *b"TALUSBS\x01";
 
 /// The parts of a binary state before its grains.
 #[derive(Serialize, Deserialize)]
@@ -328,19 +334,52 @@ enum BinaryBody {
 /// One contact of a binary state; `H` is its law's history in the law's own binary
 /// encoding (`&[u8]` when written, `Vec<u8>` when read).
 #[derive(Serialize, Deserialize)]
-struct BinaryContact<H> {
+struct BinaryContact<H, G = ContactGeometryParts> {
     a: u32,
     b: BinaryBody,
     /// Index into [`BinaryHeader::laws`].
     law: u16,
-    geometry: ContactGeometryParts,
+    geometry: G,
     force: ContactForceParts,
     history: H,
 }
 
 /// [`ContactGeometry`] as plain fields.
 #[derive(Serialize, Deserialize)]
-struct ContactGeometryParts(DVec3, f64, DVec3);
+struct ContactGeometryParts(DVec3, f64);
+
+/// A contact's geometry in format 1: normal, overlap and the contact point (not read).
+#[derive(Serialize, Deserialize)]
+struct ContactGeometryPartsWithPoint(DVec3, f64, DVec3);
+
+impl From<ContactGeometryPartsWithPoint> for ContactGeometryParts {
+    fn from(
+        ContactGeometryPartsWithPoint(normal, overlap, _): ContactGeometryPartsWithPoint,
+    ) -> Self {
+        Self(normal, overlap)
+    }
+}
+
+/// [`take_contact`] for one format's geometry.
+type TakeContact =
+    for<'a> fn(&'a [u8]) -> postcard::Result<(Option<BinaryContact<Vec<u8>>>, &'a [u8])>;
+
+/// Reads the next entry of a binary state's contact list, whose geometry is encoded as
+/// `G`: `None` at the list's end.
+fn take_contact<G: serde::de::DeserializeOwned + Into<ContactGeometryParts>>(
+    bytes: &[u8],
+) -> postcard::Result<(Option<BinaryContact<Vec<u8>>>, &[u8])> {
+    let (c, rest): (Option<BinaryContact<Vec<u8>, G>>, _) = postcard::take_from_bytes(bytes)?;
+    let c = c.map(|c| BinaryContact {
+        a: c.a,
+        b: c.b,
+        law: c.law,
+        geometry: c.geometry.into(),
+        force: c.force,
+        history: c.history,
+    });
+    Ok((c, rest))
+}
 
 /// [`ContactForce`] as plain fields.
 #[derive(Serialize, Deserialize)]
@@ -500,7 +539,7 @@ fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<
                     .iter()
                     .position(|l| l == slot.law_type)
                     .unwrap_or(0) as u16,
-                geometry: ContactGeometryParts(g.normal, g.overlap, g.point),
+                geometry: ContactGeometryParts(g.normal, g.overlap),
                 force: ContactForceParts(f.force, f.torque_a, f.torque_b),
                 history: history.as_slice(),
             };
@@ -515,9 +554,18 @@ fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<
 /// names and each contact's history into RON text by its law in `table`.
 fn decode_state(bytes: &[u8], table: Option<&ContactLawTable>) -> Result<SavedState, String> {
     let fail = |e: postcard::Error| format!("not a readable binary state: {e}");
-    let rest = bytes
-        .strip_prefix(&BINARY_MAGIC)
-        .ok_or("not a Talus binary state (its first bytes are not TALUSBS, format 1)")?;
+    let (rest, take_contact): (_, TakeContact) = match (
+        bytes.strip_prefix(&BINARY_MAGIC),
+        bytes.strip_prefix(&BINARY_MAGIC_1),
+    ) {
+        (Some(rest), _) => (rest, take_contact::<ContactGeometryParts>),
+        (None, Some(rest)) => (rest, take_contact::<ContactGeometryPartsWithPoint>),
+        (None, None) => {
+            return Err(
+                "not a Talus binary state (its first bytes are not TALUSBS, format 1 or 2)".into(),
+            );
+        }
+    };
     let (header, mut rest): (BinaryHeader, _) = postcard::take_from_bytes(rest).map_err(fail)?;
     let BinaryHeader {
         mut state,
@@ -548,8 +596,7 @@ fn decode_state(bytes: &[u8], table: Option<&ContactLawTable>) -> Result<SavedSt
         });
     }
     loop {
-        let (c, tail): (Option<BinaryContact<Vec<u8>>>, _) =
-            postcard::take_from_bytes(rest).map_err(fail)?;
+        let (c, tail) = take_contact(rest).map_err(fail)?;
         rest = tail;
         let Some(c) = c else { break };
         let law = laws
@@ -559,7 +606,10 @@ fn decode_state(bytes: &[u8], table: Option<&ContactLawTable>) -> Result<SavedSt
             .and_then(|t| t.slots.iter().flatten().find(|s| s.law_type == law))
             .and_then(|slot| (slot.history_text)(&c.history))
             .ok_or_else(|| format!("a contact's history of law {law} cannot be read"))?;
-        let ContactGeometryParts(normal, overlap, point) = c.geometry;
+        let ContactGeometryParts(normal, overlap) = c.geometry;
+        let point = state.grains.get(c.a as usize).map_or(DVec3::ZERO, |a| {
+            ContactGeometry { normal, overlap }.point(a.position, a.radius)
+        });
         let ContactForceParts(force, torque_a, torque_b) = c.force;
         state.contacts.push(SavedContact {
             law: law.clone(),
@@ -662,6 +712,64 @@ impl Drop for BinaryStateFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A contact list of format 1 (each geometry with its contact point) reads as the same
+    /// contacts as one of format 2, the point dropped; the list ends at its `None`.
+    #[test]
+    fn contacts_of_binary_format_1_are_still_read() {
+        let (normal, overlap, point) = (DVec3::new(0.0, 0.6, 0.8), 1e-5, DVec3::splat(2.5));
+        let force = || ContactForceParts(DVec3::X, DVec3::Y, DVec3::Z);
+        let history = [7u8, 8, 9];
+        let mut old = postcard::to_allocvec(&Some(BinaryContact {
+            a: 3,
+            b: BinaryBody::Wall(1),
+            law: 2,
+            geometry: ContactGeometryPartsWithPoint(normal, overlap, point),
+            force: force(),
+            history: &history[..],
+        }))
+        .unwrap();
+        old.extend(postcard::to_allocvec(&None::<BinaryContact<&[u8]>>).unwrap());
+        let mut new = postcard::to_allocvec(&Some(BinaryContact {
+            a: 3,
+            b: BinaryBody::Wall(1),
+            law: 2,
+            geometry: ContactGeometryParts(normal, overlap),
+            force: force(),
+            history: &history[..],
+        }))
+        .unwrap();
+        new.extend(postcard::to_allocvec(&None::<BinaryContact<&[u8]>>).unwrap());
+        assert!(old.len() > new.len(), "format 1 carries the point");
+        let read = |bytes: &[u8], take: TakeContact| {
+            let (c, rest) = take(bytes).unwrap();
+            let c = c.expect("a contact");
+            let (end, rest) = take(rest).unwrap();
+            assert!(end.is_none() && rest.is_empty(), "the list ends after it");
+            let ContactGeometryParts(n, o) = c.geometry;
+            let ContactForceParts(f, ta, tb) = c.force;
+            let wall = matches!(c.b, BinaryBody::Wall(1));
+            (c.a, wall, c.law, n, o, f, ta, tb, c.history)
+        };
+        assert_eq!(
+            read(&old, take_contact::<ContactGeometryPartsWithPoint>),
+            read(&new, take_contact::<ContactGeometryParts>)
+        );
+        assert_eq!(
+            read(&new, take_contact::<ContactGeometryParts>),
+            (
+                3,
+                true,
+                2,
+                normal,
+                overlap,
+                DVec3::X,
+                DVec3::Y,
+                DVec3::Z,
+                history.to_vec()
+            )
+        );
+    }
 
     #[test]
     fn floats_survive_the_text_round_trip_exactly() {

@@ -422,7 +422,7 @@ pub fn sample_fields(
                     xa - snapshot.separation(xa, snapshot.position(j))
                 }
                 // A wall has no centre: the branch ends at the contact point.
-                ContactKind::GrainWall => g.point,
+                ContactKind::GrainWall => g.point(xa, snapshot.radius(i)),
             };
             let branch = far - xa;
             let pieces = ((branch.length() / (PIECE_WIDTHS * spec.width)).ceil() as usize)

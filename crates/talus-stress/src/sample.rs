@@ -340,10 +340,11 @@ pub fn sample_stress(
         let active = f.is_active(g);
         let xa = snapshot.position(i);
         let ra = snapshot.radius(i);
-        let point = g.point;
         // The branch vectors exactly as the kinematics computed them, so that the
-        // moment beyond branch × force is exactly zero for a law that adds none.
-        let branch_a = -g.normal * (ra - 0.5 * g.overlap);
+        // moment beyond branch × force is exactly zero for a law that adds none. The
+        // contact point from `a`'s side: on `a`'s side of a periodic seam.
+        let branch_a = g.branch_a(ra);
+        let point = xa + branch_a;
         let moment_a = f.torque_a - branch_a.cross(f.force);
         let (far, moment_b) = match c.kind {
             ContactKind::GrainGrain => {
