@@ -12,7 +12,8 @@ pub struct ContactKinematics {
     pub normal: DVec3,
     /// Overlap δ (positive in contact), m.
     pub overlap: f64,
-    /// Contact point.
+    /// Contact point (the middle of the overlap), the centre of `a` plus `branch_a`: the
+    /// point [`crate::ContactGeometry::point`] derives after the evaluation.
     pub point: DVec3,
     /// Contact point minus the centre of `a`.
     pub branch_a: DVec3,
@@ -95,7 +96,7 @@ impl ContactKinematics {
         let overlap = ra + rb - dist;
         let branch_a = -normal * (ra - 0.5 * overlap);
         let branch_b = normal * (rb - 0.5 * overlap);
-        let point = s.position(j) + branch_b;
+        let point = s.position(i) + branch_a;
         let (wa, wb) = (s.omega[i], s.omega[j]);
         let relative_velocity = (s.velocity(i) + wa.cross(branch_a))
             - (s.velocity(j) + image_velocity + wb.cross(branch_b));
@@ -163,7 +164,7 @@ pub struct ContactKinematicsLanes {
     pub normal: V4,
     /// Overlap δ, m.
     pub overlap: F4,
-    /// Contact point.
+    /// Contact point, the centre of `a` plus `branch_a`.
     pub point: V4,
     /// Contact point minus the centre of `a`.
     pub branch_a: V4,
@@ -227,7 +228,7 @@ impl ContactKinematicsLanes {
         let half = F4::splat(0.5);
         let branch_a = -normal * (ra - half * overlap);
         let branch_b = normal * (rb - half * overlap);
-        let point = pb + branch_b;
+        let point = a.position + branch_a;
         let (wa, wb) = (a.omega, b.omega);
         let (va, vb) = (a.velocity, b.velocity);
         // The scalar form adds the (here zero) velocity of b's image: kept, so that the
