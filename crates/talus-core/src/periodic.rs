@@ -6,7 +6,6 @@
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
-use rayon::prelude::*;
 
 use crate::components::{Frozen, Grain, Position, Velocity};
 use crate::resources::Clock;
@@ -248,39 +247,39 @@ impl ImageLanes {
     }
 }
 
-/// Wraps grain positions back into the periodic box after the drift.
-pub fn wrap_positions(periodic: Res<PeriodicBox>, mut grains: Query<&mut Position, With<Grain>>) {
-    let b = *periodic;
-    // Almost every grain is inside the box after a step: one test of all axes at once (an
-    // axis that does not wrap has infinite bounds), and the full rule for the others.
-    let lo = DVec3::from_array(std::array::from_fn(|a| {
-        if b.axes[a] {
-            b.lo[a]
-        } else {
-            f64::NEG_INFINITY
+impl PeriodicBox {
+    /// The unsheared wrap of one position as a closure with the box's bounds prepared:
+    /// what [`crate::snapshot::gather_snapshot`] applies to each grain as it copies its
+    /// position, so that the positions are read once a step instead of twice. (A
+    /// Lees–Edwards box is wrapped by [`wrap_positions_sheared`], after which every grain
+    /// is inside and this changes nothing.)
+    #[inline]
+    pub fn wrapper(&self) -> impl Fn(&mut DVec3) + Sync + '_ {
+        // An axis that does not wrap has infinite bounds, so that almost every grain,
+        // inside the box after a step, passes one test of all axes at once; the others
+        // take the full rule.
+        let bound = |a: usize, value: f64, open: f64| if self.axes[a] { value } else { open };
+        let lo = DVec3::from_array(std::array::from_fn(|a| {
+            bound(a, self.lo[a], f64::NEG_INFINITY)
+        }));
+        let hi = DVec3::from_array(std::array::from_fn(|a| bound(a, self.hi[a], f64::INFINITY)));
+        move |p: &mut DVec3| {
+            let inside = (p.x >= lo.x)
+                & (p.x < hi.x)
+                & (p.y >= lo.y)
+                & (p.y < hi.y)
+                & (p.z >= lo.z)
+                & (p.z < hi.z);
+            if !inside {
+                *p = self.wrap(*p);
+            }
         }
-    }));
-    let hi = DVec3::from_array(std::array::from_fn(|a| {
-        if b.axes[a] { b.hi[a] } else { f64::INFINITY }
-    }));
-    let inside = |p: DVec3| {
-        (p.x >= lo.x) & (p.x < hi.x) & (p.y >= lo.y) & (p.y < hi.y) & (p.z >= lo.z) & (p.z < hi.z)
-    };
-    for mut p in grains.contiguous_iter_mut().expect("grain query is dense") {
-        p.bypass_change_detection()
-            .par_chunks_mut(4096)
-            .for_each(|chunk| {
-                for p in chunk {
-                    if !inside(p.0) {
-                        p.0 = b.wrap(p.0);
-                    }
-                }
-            });
     }
 }
 
-/// The Lees–Edwards version of [`wrap_positions`], scheduled instead of it when the box
-/// is sheared: advances the image offset to the pass's time, then wraps each grain,
+/// The wrap of a Lees–Edwards box, scheduled after the drift when the box is sheared (an
+/// unsheared box is wrapped by [`crate::snapshot::gather_snapshot`] as it copies the
+/// positions): advances the image offset to the pass's time, then wraps each grain,
 /// moving position and velocity together through the gradient seam. Frozen grains are
 /// wrapped in position only (their velocity is prescribed).
 pub fn wrap_positions_sheared(

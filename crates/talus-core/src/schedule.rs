@@ -219,9 +219,10 @@ impl SimBuilder {
     }
 
     /// Makes the simulation periodic along the box's flagged axes: positions are wrapped
-    /// into the box after each drift, and pair separations take the nearest image. A box
-    /// with Lees–Edwards shear gets the sheared wrap (which also advances the image
-    /// offset) instead of the plain one.
+    /// into the box by [`snapshot::gather_snapshot`] as it copies them (the first system of
+    /// the broad phase, right after the drift), and pair separations take the nearest
+    /// image. A box with Lees–Edwards shear gets the sheared wrap (which also advances the
+    /// image offset and moves velocities through the gradient seam) after the drift.
     pub fn periodic(&mut self, box_: crate::periodic::PeriodicBox) {
         self.world.insert_resource(box_);
         if box_.shear.is_some() {
@@ -229,12 +230,6 @@ impl SimBuilder {
                 Stage::IntegratePositions,
                 "wrap_positions_lees_edwards",
                 crate::periodic::wrap_positions_sheared,
-            );
-        } else {
-            self.add_system(
-                Stage::IntegratePositions,
-                "wrap_positions",
-                crate::periodic::wrap_positions,
             );
         }
     }

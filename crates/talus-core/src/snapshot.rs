@@ -512,14 +512,16 @@ fn copy_column<T: Sync, U: Send>(dst: &mut [U], src: &[T], value: impl Fn(&T) ->
 /// heap).
 type ChunkMoves = (f64, SmallVec<[(usize, Moves); 20]>);
 
-/// Copies grain and wall state into the snapshot, reusing its allocations.
+/// Copies grain and wall state into the snapshot, reusing its allocations, and wraps the
+/// grains' positions into an unsheared periodic box as it copies them (the drift, just
+/// before, may have carried grains across a face; [`crate::periodic::PeriodicBox::wrapper`]).
 #[allow(clippy::type_complexity)]
 pub fn gather_snapshot(
     mut snapshot: ResMut<GrainSnapshot>,
-    grains: Query<
+    mut grains: Query<
         (
             Entity,
-            &Position,
+            &mut Position,
             &Velocity,
             &AngularVelocity,
             &Radius,
@@ -535,7 +537,7 @@ pub fn gather_snapshot(
     let s = &mut *snapshot;
     s.set_periodic(periodic.map(|p| *p));
     let n: usize = grains
-        .contiguous_iter()
+        .contiguous_iter_mut()
         .expect("grain query is dense")
         .map(|(e, ..)| e.len())
         .sum();
@@ -559,7 +561,15 @@ pub fn gather_snapshot(
         block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
     }
     let (periodic_box, image) = (s.periodic, s.image);
-    for (e, p, v, w, r, m, mat, frozen) in grains.contiguous_iter().expect("grain query is dense") {
+    // An unsheared box is wrapped here, each grain as the copy reads its position (a pass
+    // of its own read every position once more); a sheared one was wrapped after the
+    // drift, with the velocities.
+    let wrap_box = periodic_box.filter(|b| b.shear.is_none());
+    let wrap = wrap_box.as_ref().map(|b| b.wrapper());
+    for (e, mut p, v, w, r, m, mat, frozen) in
+        grains.contiguous_iter_mut().expect("grain query is dense")
+    {
+        let p = p.bypass_change_detection();
         let table_start = k;
         let range = k..k + e.len();
         k += e.len();
@@ -585,49 +595,54 @@ pub fn gather_snapshot(
                 // copy. The largest radius and the moves are taken in the same
                 // pass (a second pass would read every record again for one number).
                 // Kept between steps for its allocation; extended in chunk order.
-                chunk_results.par_extend(records.par_chunks_mut(COPY_CHUNK).enumerate().map(
-                    |(c, records)| {
-                        let from = c * COPY_CHUNK;
-                        let to = from + records.len();
-                        let sources = p[from..to]
-                            .iter()
-                            .zip(&r[from..to])
-                            .zip(v[from..to].iter().zip(&m[from..to]));
-                        // A frozen grain resists like an infinite mass (a zero inverse):
-                        // a contact's reduced mass is then the moving grain's own (as
-                        // LAMMPS does for frozen atoms). `Frozen` is a table component, so
-                        // a table's grains are all frozen or none is.
-                        let inverse_mass = |m: &Mass| if frozen { 0.0 } else { 1.0 / m.0 };
-                        for (record, ((p, r), (v, m))) in records.iter_mut().zip(sources) {
-                            *record = GrainRecord {
-                                position: p.0,
-                                radius: r.0,
-                                velocity: v.0,
-                                inverse_mass: inverse_mass(m),
-                            };
+                let chunks = records
+                    .par_chunks_mut(COPY_CHUNK)
+                    .zip(p.par_chunks_mut(COPY_CHUNK));
+                chunk_results.par_extend(chunks.enumerate().map(|(c, (records, positions))| {
+                    let from = c * COPY_CHUNK;
+                    let to = from + records.len();
+                    let sources = positions
+                        .iter_mut()
+                        .zip(&r[from..to])
+                        .zip(v[from..to].iter().zip(&m[from..to]));
+                    // A frozen grain resists like an infinite mass (a zero inverse):
+                    // a contact's reduced mass is then the moving grain's own (as
+                    // LAMMPS does for frozen atoms). `Frozen` is a table component, so
+                    // a table's grains are all frozen or none is.
+                    let inverse_mass = |m: &Mass| if frozen { 0.0 } else { 1.0 / m.0 };
+                    for (record, ((p, r), (v, m))) in records.iter_mut().zip(sources) {
+                        if let Some(wrap) = &wrap {
+                            wrap(&mut p.0);
                         }
-                        let largest_radius = r[from..to]
-                            .iter()
-                            .fold(0.0, |largest, r| f64::max(largest, r.0));
-                        // The moves of each block of grains (by dense index) this chunk
-                        // holds a part of; a table need not start at a block's start.
-                        let mut blocks = SmallVec::new();
-                        if track_moves {
-                            let mut from = from;
-                            while from < to {
-                                let block = (table_start + from) / MOVE_BLOCK;
-                                let end = ((block + 1) * MOVE_BLOCK - table_start).min(to);
-                                let mut moves = Moves::still();
-                                for (p, q) in p[from..end].iter().zip(&reference[from..end]) {
-                                    moves.add(nearest_separation(&periodic_box, &image, p.0 - *q));
-                                }
-                                blocks.push((block, moves));
-                                from = end;
+                        *record = GrainRecord {
+                            position: p.0,
+                            radius: r.0,
+                            velocity: v.0,
+                            inverse_mass: inverse_mass(m),
+                        };
+                    }
+                    let largest_radius = r[from..to]
+                        .iter()
+                        .fold(0.0, |largest, r| f64::max(largest, r.0));
+                    // The moves of each block of grains (by dense index) this chunk
+                    // holds a part of; a table need not start at a block's start.
+                    let mut blocks = SmallVec::new();
+                    if track_moves {
+                        let mut from = from;
+                        while from < to {
+                            let block = (table_start + from) / MOVE_BLOCK;
+                            let end = ((block + 1) * MOVE_BLOCK - table_start).min(to);
+                            let mut moves = Moves::still();
+                            let in_chunk = from - c * COPY_CHUNK..end - c * COPY_CHUNK;
+                            for (p, q) in positions[in_chunk].iter().zip(&reference[from..end]) {
+                                moves.add(nearest_separation(&periodic_box, &image, p.0 - *q));
                             }
+                            blocks.push((block, moves));
+                            from = end;
                         }
-                        (largest_radius, blocks)
-                    },
-                ));
+                    }
+                    (largest_radius, blocks)
+                }));
             },
             || {
                 copy_column(omega, w, |x| x.0);
@@ -733,6 +748,42 @@ mod tests {
         assert!((gather(&mut world) - expected).abs() < 1e-12 * expected);
         spawn_grain(&mut world, DVec3::new(7.0, 5.0, 5.0));
         assert_eq!(gather(&mut world), f64::INFINITY, "a grain was added");
+    }
+
+    /// The drift leaves a grain that crossed a face of an unsheared box outside it;
+    /// `gather_snapshot` wraps it (the wrap's own rule) in the world and in the snapshot,
+    /// and measures its move the short way across the seam. A non-periodic axis is left
+    /// alone.
+    #[test]
+    fn gather_wraps_grains_carried_out_of_the_box() {
+        let mut world = World::new();
+        world.insert_resource(GrainSnapshot::default());
+        let box_ = PeriodicBox {
+            lo: DVec3::ZERO,
+            hi: DVec3::new(10.0, 10.0, 10.0),
+            axes: [true, true, false],
+            shear: None,
+        };
+        world.insert_resource(box_);
+        let a = spawn_grain(&mut world, DVec3::new(9.9, 0.1, 5.0));
+        spawn_grain(&mut world, DVec3::new(5.0, 5.0, 5.0));
+        gather(&mut world);
+        world.resource_mut::<GrainSnapshot>().mark_move_reference();
+        // Across x = 10 and y = 0 in one step, and out of the box along z (not periodic).
+        let drifted = DVec3::new(10.2, -0.1, 12.0);
+        world.get_mut::<Position>(a).unwrap().0 = drifted;
+        let bound_sq = gather(&mut world);
+        let wrapped = box_.wrap(drifted);
+        assert_eq!(wrapped, DVec3::new(10.2 - 10.0, -0.1 + 10.0, 12.0));
+        assert_eq!(world.get::<Position>(a).unwrap().0, wrapped);
+        assert_eq!(world.resource::<GrainSnapshot>().position(0), wrapped);
+        // The move: (0.3, −0.2, 7), the short way across both seams; the other grain stays,
+        // so the bound is half the diagonal of the box of the two moves.
+        let expected = (0.5 * DVec3::new(0.3, -0.2, 7.0)).length_squared();
+        assert!(
+            (bound_sq - expected).abs() < 1e-9,
+            "{bound_sq} against {expected}"
+        );
     }
 
     /// No grain: nothing moved (the empty box of moves gives no NaN).
