@@ -176,9 +176,12 @@ pub fn run_scene(
         .map_err(|e| RunError::Output(format!("cannot create {}: {e}", out_dir.display())))?;
     let mut builder = built.builder;
     let dt = builder.config().dt;
+    // Steps between recorded frames, when the scene records (a frame logs the energies).
+    let mut recording_every = None;
     let recording = if built.output.recording {
         let rec = out_dir.join("recording.rrd");
         let every = steps_for(built.output.recording_interval, dt);
+        recording_every = Some(every);
         talus_rerun::RerunExportPlugin::new(&rec, every)
             .with_recording_name(format!("talus/{}", built.name))
             .install(&mut builder)
@@ -192,8 +195,20 @@ pub fn run_scene(
         sim.mark_primed();
     }
     let report_every = steps_for(built.output.report_interval, dt);
-    let config = sim.config().clone();
     let total_steps = built.stop.steps;
+    // The kinetic energies are read at report steps, recorded frames and, by a deposition,
+    // at its checks: the second kick sums them only for those steps
+    // (`KineticEnergyDue`).
+    let deposition = sim
+        .world
+        .contains_resource::<talus_scene::packing::Deposition>();
+    let kinetic_due = |step: u64| {
+        deposition
+            || step.is_multiple_of(report_every)
+            || step == total_steps
+            || recording_every.is_some_and(|every| step.is_multiple_of(every))
+    };
+    let config = sim.config().clone();
 
     let progress = if options.progress && !options.quiet && std::io::stderr().is_terminal() {
         let bar = ProgressBar::with_draw_target(Some(total_steps), ProgressDrawTarget::stderr());
@@ -227,6 +242,8 @@ pub fn run_scene(
         samples.push(ReportSample::take(&sim.world));
         keep_last_good(&mut last_good, &mut sim.world, &built.name, options.quiet);
         for step in sim.step_count() + 1..=total_steps {
+            let due = kinetic_due(step);
+            sim.world.resource_mut::<KineticEnergyDue>().0 = due;
             let step_start = Instant::now();
             let stepped = sim.step();
             stepping += step_start.elapsed().as_secs_f64();
@@ -240,6 +257,10 @@ pub fn run_scene(
             }
             let requested = sim.world.resource::<StopRequest>().0.clone();
             if step % report_every == 0 || step == total_steps || requested.is_some() {
+                if !due {
+                    // A stop asked for at a step that was not to be reported.
+                    talus_core::integrate::sum_kinetic_energy(&mut sim.world);
+                }
                 let sample = ReportSample::take(&sim.world);
                 let settled = built
                     .stop

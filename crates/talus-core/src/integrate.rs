@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use crate::components::*;
 use crate::energy::{EnergyLedger, EnergySnapshot};
 use crate::lanes::{F4, V4};
-use crate::resources::{BlowUp, Clock, Health, SimConfig};
+use crate::resources::{BlowUp, Clock, Health, KineticEnergyDue, SimConfig};
 
 /// Grains below this count are integrated on one thread: spawning tasks costs more.
 const PARALLEL_THRESHOLD: usize = 4096;
@@ -208,9 +208,21 @@ type KineticQuery<'w, 's> = Query<
 pub fn kinetic_energy(
     config: Res<SimConfig>,
     mut energy: ResMut<EnergySnapshot>,
+    mut health: ResMut<Health>,
     mut grains: KineticQuery,
 ) {
-    kick_and_sum_kinetic(&config, 0.0, &mut energy, &mut grains);
+    kick_and_sum_kinetic(&config, 0.0, true, &mut energy, &mut health, &mut grains);
+}
+
+/// Brings the kinetic energies of the [`EnergySnapshot`] up to date with the grains'
+/// state, with the same sums, bit for bit, as the second kick takes: for a driver that
+/// cleared [`KineticEnergyDue`] for a step and then needs them after it (a run stopped
+/// at a step it did not plan to report).
+pub fn sum_kinetic_energy(world: &mut World) {
+    use bevy_ecs::system::RunSystemOnce;
+    world
+        .run_system_once(kinetic_energy)
+        .expect("the core resources are installed");
 }
 
 /// Second kick of translation (and of rotation when it is integrated), v += (1 − a)·dt·F/m
@@ -218,25 +230,32 @@ pub fn kinetic_energy(
 /// [`kinetic_energy`] over the kicked state: one read of the velocities, spins, forces,
 /// torques, masses and inertias instead of two. Each chunk is kicked whole before it is
 /// summed, with the same operations in the same order as the two separate passes, so the
-/// state and the sums are the same to the bit.
+/// state and the sums are the same to the bit. At a step for which [`KineticEnergyDue`]
+/// is cleared the sums are not taken; the velocities and spins are only checked finite.
 pub fn second_kick_and_kinetic_energy(
     config: Res<SimConfig>,
     clock: Res<Clock>,
+    due: Res<KineticEnergyDue>,
     mut energy: ResMut<EnergySnapshot>,
+    mut health: ResMut<Health>,
     mut grains: KineticQuery,
 ) {
     // Zero in the priming pass: nothing moves, the energies are still sampled.
     let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
-    kick_and_sum_kinetic(&config, kick, &mut energy, &mut grains);
+    kick_and_sum_kinetic(&config, kick, due.0, &mut energy, &mut health, &mut grains);
 }
 
-/// Kicks every chunk of grains by `kick` (nothing when 0; spins only with rotation) and
-/// sums its kinetic energies ([`kinetic_energy`]) while it is in cache, per fixed chunk of
-/// grains, the chunks in order: the same sums on any number of threads.
+/// Kicks every chunk of grains by `kick` (nothing when 0; spins only with rotation) and,
+/// when `sum`, sums its kinetic energies ([`kinetic_energy`]) while it is in cache, per
+/// fixed chunk of grains, the chunks in order: the same sums on any number of threads.
+/// Records in `health` whether every velocity and spin came out finite (from the sums
+/// when they are taken, as a NaN or an infinity reaches them).
 fn kick_and_sum_kinetic(
     config: &SimConfig,
     kick: f64,
+    sum: bool,
     energy: &mut EnergySnapshot,
+    health: &mut Health,
     grains: &mut KineticQuery,
 ) {
     let terms = KineticTerms::new(config);
@@ -267,11 +286,31 @@ fn kick_and_sum_kinetic(
                             }
                         }
                     }
-                    terms.chunk_sums(v, w, m, i, f, t)
+                    if sum {
+                        terms.chunk_sums(v, w, m, i, f, t)
+                    } else {
+                        [finite_marker(v, w), 0.0, 0.0]
+                    }
                 }),
         );
     }
-    energy.store_kinetic(&partial);
+    if sum {
+        energy.store_kinetic(&partial);
+        health.motion_finite =
+            energy.translational_kinetic.is_finite() && energy.rotational_kinetic.is_finite();
+    } else {
+        health.motion_finite = partial.iter().all(|[marker, ..]| *marker == 0.0);
+    }
+}
+
+/// 0 when every velocity and spin of a chunk is finite, NaN otherwise. The tests are
+/// and-ed without a branch or a chain of floating-point additions (a running sum of
+/// x − x, one addition a number in a row, cost as much as the kinetic sums themselves).
+fn finite_marker(v: &[Velocity], w: &[AngularVelocity]) -> f64 {
+    let finite = |x: DVec3| x.x.is_finite() & x.y.is_finite() & x.z.is_finite();
+    let all = v.iter().fold(true, |all, v| all & finite(v.0))
+        & w.iter().fold(true, |all, w| all & finite(w.0));
+    if all { 0.0 } else { f64::NAN }
 }
 
 /// The coefficients of the kinetic-energy sums for the run's integrator.
@@ -433,28 +472,31 @@ fn lanes1<T>(k: usize, live: usize, column: &[T], value: impl Fn(&T) -> f64) -> 
     F4::from_fn(|l| if l < live { value(&column[k + l]) } else { 1.0 })
 }
 
-/// Stops the run on a non-finite position, velocity or force, or on an overlap beyond
-/// the bound in [`Health`].
+/// Stops the run on a non-finite velocity or spin after the kick (a non-finite force or
+/// position reaches one), or on an overlap beyond the bound in [`Health`].
 pub fn health_check(
     clock: Res<Clock>,
     energy: Res<EnergySnapshot>,
     mut health: ResMut<Health>,
-    grains: Query<(Entity, &Position, &Velocity, &Force), With<Grain>>,
+    grains: Query<(Entity, &Position, &Velocity, &AngularVelocity, &Force), With<Grain>>,
 ) {
     if health.blow_up.is_some() {
         return;
     }
-    let finite = energy.translational_kinetic.is_finite() && energy.rotational_kinetic.is_finite();
-    if !finite {
+    if !health.motion_finite {
+        let finite =
+            |(_, p, v, w, f): &(Entity, &Position, &Velocity, &AngularVelocity, &Force)| {
+                p.0.is_finite() && v.0.is_finite() && w.0.is_finite() && f.0.is_finite()
+            };
         let bad: Vec<Entity> = grains
             .iter()
-            .filter(|(_, p, v, f)| !(p.0.is_finite() && v.0.is_finite() && f.0.is_finite()))
+            .filter(|g| !finite(g))
             .map(|(e, ..)| e)
             .take(16)
             .collect();
         health.blow_up = Some(BlowUp {
             step: clock.step,
-            reason: "a position, velocity or force became NaN or infinite".into(),
+            reason: "a position, velocity, spin or force became NaN or infinite".into(),
             entities: bad,
         });
         return;
@@ -471,5 +513,124 @@ pub fn health_check(
                 .map(|(a, b)| vec![a, b])
                 .unwrap_or_default(),
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bevy_ecs::system::RunSystemOnce;
+
+    /// A world with the resources the second kick and the health check read, and
+    /// `count` grains in motion and under load (grain `k`'s state scaled by k + 1).
+    fn world_with_grains(count: usize, due: bool) -> (World, Vec<Entity>) {
+        let mut world = World::new();
+        world.insert_resource(SimConfig {
+            dimension: crate::resources::Dimension::Three,
+            dt: 1e-4,
+            gravity: DVec3::ZERO,
+            integrator: crate::resources::Integrator::VelocityVerlet,
+            rotation: true,
+        });
+        world.insert_resource(Clock {
+            step: 1,
+            time: 1e-4,
+            pass_dt: 1e-4,
+        });
+        world.insert_resource(KineticEnergyDue(due));
+        world.insert_resource(EnergySnapshot::default());
+        world.insert_resource(Health::default());
+        let grains = (0..count)
+            .map(|k| {
+                let s = (k + 1) as f64;
+                world
+                    .spawn((
+                        Grain,
+                        Position(DVec3::new(s, 0.0, 0.0)),
+                        Velocity(DVec3::new(0.3, -0.2, 0.1) * s),
+                        AngularVelocity(DVec3::new(-1.0, 2.0, 0.5) * s),
+                        Mass(2.0 + 0.1 * s),
+                        MomentOfInertia(0.01 * s),
+                        Force(DVec3::new(1.0, 0.5, -2.0) * s),
+                        Torque(DVec3::new(0.01, -0.02, 0.03) * s),
+                    ))
+                    .id()
+            })
+            .collect();
+        (world, grains)
+    }
+
+    /// The energies summed on demand after a step whose kick did not sum them are those,
+    /// bit for bit, that the kick sums when they are due: Σ½mv² and Σ½Iω² of the kicked
+    /// state, checked against their own formula as well.
+    #[test]
+    fn energies_summed_on_demand_are_those_of_the_kick() {
+        let count = 3000; // Three chunks, the last one partial.
+        let (mut due_world, _) = world_with_grains(count, true);
+        due_world
+            .run_system_once(second_kick_and_kinetic_energy)
+            .unwrap();
+        let (mut world, _) = world_with_grains(count, false);
+        world
+            .run_system_once(second_kick_and_kinetic_energy)
+            .unwrap();
+        assert_eq!(
+            *world.resource::<EnergySnapshot>(),
+            EnergySnapshot::default(),
+            "not due: the snapshot is left as it was"
+        );
+        assert!(world.resource::<Health>().motion_finite);
+        sum_kinetic_energy(&mut world);
+        let (on_demand, in_kick) = (
+            world.resource::<EnergySnapshot>(),
+            due_world.resource::<EnergySnapshot>(),
+        );
+        assert_eq!(on_demand, in_kick);
+        let on_demand = on_demand.clone();
+        let mut grains = world.query::<(&Velocity, &AngularVelocity, &Mass, &MomentOfInertia)>();
+        let (translational, rotational) = grains.iter(&world).fold((0.0, 0.0), |(t, r), g| {
+            (
+                t + 0.5 * g.2.0 * g.0.0.length_squared(),
+                r + 0.5 * g.3.0 * g.1.0.length_squared(),
+            )
+        });
+        assert!((on_demand.translational_kinetic - translational).abs() <= 1e-12 * translational);
+        assert!((on_demand.rotational_kinetic - rotational).abs() <= 1e-12 * rotational);
+    }
+
+    /// A NaN velocity or an infinite spin stops the run at the step it appears, whether
+    /// the step sums the kinetic energies or not, naming the grain.
+    #[test]
+    fn a_non_finite_velocity_or_spin_stops_the_run_at_any_step() {
+        for due in [true, false] {
+            for spin in [false, true] {
+                let (mut world, grains) = world_with_grains(2000, due);
+                let bad = grains[1234];
+                if spin {
+                    world.get_mut::<AngularVelocity>(bad).unwrap().0.y = f64::INFINITY;
+                } else {
+                    world.get_mut::<Velocity>(bad).unwrap().0.z = f64::NAN;
+                }
+                world
+                    .run_system_once(second_kick_and_kinetic_energy)
+                    .unwrap();
+                assert!(
+                    !world.resource::<Health>().motion_finite,
+                    "due {due}, spin {spin}"
+                );
+                world.run_system_once(health_check).unwrap();
+                let blow_up = world.resource::<Health>().blow_up.clone();
+                let blow_up = blow_up.expect("the run is stopped");
+                assert_eq!(blow_up.step, 1);
+                assert_eq!(blow_up.entities, vec![bad], "due {due}, spin {spin}");
+            }
+        }
+        // And a finite state does not stop it.
+        let (mut world, _) = world_with_grains(2000, false);
+        world
+            .run_system_once(second_kick_and_kinetic_energy)
+            .unwrap();
+        world.run_system_once(health_check).unwrap();
+        assert!(world.resource::<Health>().blow_up.is_none());
     }
 }

@@ -145,12 +145,44 @@ pub struct BlowUp {
 }
 
 /// Set by a safety check when the run must stop; the driver stops and reports it.
-#[derive(Resource, Clone, Debug, Default)]
+#[derive(Resource, Clone, Debug)]
 pub struct Health {
     /// The first problem found, if any.
     pub blow_up: Option<BlowUp>,
     /// Largest overlap / radius allowed before a run is stopped. Default: 0.5.
     pub max_overlap_ratio: f64,
+    /// Whether every grain's velocity and spin was finite after the last kick (set by the
+    /// second kick, or by the kinetic-energy sums under Gear).
+    pub motion_finite: bool,
+}
+
+impl Default for Health {
+    /// No problem yet, overlaps bounded at half the smaller radius.
+    fn default() -> Self {
+        Self {
+            blow_up: None,
+            max_overlap_ratio: 0.5,
+            motion_finite: true,
+        }
+    }
+}
+
+/// Whether the coming step sums the kinetic energies into the
+/// [`EnergySnapshot`](crate::energy::EnergySnapshot). True unless a driver says
+/// otherwise, so that the snapshot is current after every step. A driver that reads the
+/// energies only at some steps (`talus run`, at its report and recording steps) clears it
+/// for the others: their second kick then only checks that every velocity and spin is
+/// finite (for the health check) and leaves the snapshot's kinetic terms as they were,
+/// sparing a pass of arithmetic over the grains (2 ns a grain-step at 32,000 grains).
+/// [`crate::integrate::sum_kinetic_energy`] brings them up to date at any time, with the
+/// same bits.
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KineticEnergyDue(pub bool);
+
+impl Default for KineticEnergyDue {
+    fn default() -> Self {
+        Self(true)
+    }
 }
 
 /// Set by a protocol system (a packing generator reaching its target, say) when the run

@@ -115,10 +115,8 @@ impl SimBuilder {
         world.insert_resource(Clock::default());
         world.insert_resource(crate::resources::StopRequest::default());
         world.insert_resource(StageTimings::default());
-        world.insert_resource(Health {
-            blow_up: None,
-            max_overlap_ratio: 0.5,
-        });
+        world.insert_resource(Health::default());
+        world.insert_resource(crate::resources::KineticEnergyDue::default());
         world.insert_resource(DissipationChannels::default());
         world.insert_resource(EnergyLedger::default());
         world.insert_resource(EnergySnapshot::default());
