@@ -112,6 +112,7 @@ impl Plugin for ContactPlugin {
             "apply_contact_forces",
             apply_contact_forces,
         );
+        sim.gravity_in_force_sums();
     }
 }
 
@@ -557,7 +558,8 @@ pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
     bodies(snapshot, c, ContactBodies::default()).kin
 }
 
-/// Sums contact forces and torques onto grains (overwriting last step's totals) and
+/// Sums contact forces and torques onto grains (overwriting last step's totals, the forces
+/// starting from the grains' weights: [`SimBuilder::gravity_in_force_sums`]) and
 /// walls, and the contact energies the force loops summed per chunk
 /// ([`ContactEnergyPartials`], emptied here) into the ledger and the energy snapshot.
 /// Every sum is taken in a fixed order (contacts in query order for each grain and wall,
@@ -572,8 +574,9 @@ pub fn apply_contact_forces(
     mut energy: ResMut<EnergySnapshot>,
     mut partials: ResMut<ContactEnergyPartials>,
     contacts: Query<(&ContactBodies, &ContactForce)>,
-    mut grains: Query<(Entity, &mut Force, &mut Torque), With<Grain>>,
+    mut grains: Query<(Entity, &mut Force, &mut Torque, &Mass), With<Grain>>,
     mut walls: Query<(Entity, &mut WallLoad)>,
+    config: Res<SimConfig>,
     mut wall_force: Local<Vec<DVec3>>,
     mut picked: Local<Vec<Vec<u32>>>,
 ) {
@@ -594,22 +597,29 @@ pub fn apply_contact_forces(
         .expect("contact query is dense")
         .collect();
     let range = n.div_ceil(rayon::current_num_threads()).max(1);
-    let mut parts: Vec<(usize, &mut [Force], &mut [Torque])> = Vec::new();
+    let mut parts: Vec<(usize, &mut [Force], &mut [Torque], &[Mass])> = Vec::new();
     let mut offset = 0;
-    for (e, f, t) in grains.contiguous_iter_mut().expect("grain query is dense") {
+    for (e, f, t, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
         debug_assert_eq!(&snapshot.entity[offset..offset + e.len()], e);
         let f = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(f).0;
         let t = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(t).0;
         let len = e.len();
-        for (k, (f, t)) in f.chunks_mut(range).zip(t.chunks_mut(range)).enumerate() {
-            parts.push((offset + k * range, f, t));
+        let shares = f
+            .chunks_mut(range)
+            .zip(t.chunks_mut(range))
+            .zip(m.chunks(range));
+        for (k, ((f, t), m)) in shares.enumerate() {
+            parts.push((offset + k * range, f, t, m));
         }
         offset += len;
     }
     picked.resize_with(parts.len(), Vec::new);
     let pick = rayon::current_num_threads() > 1;
+    let g = config.gravity;
     parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
-        |((first, force, torque), picked)| sum_range(&tables, pick, first, force, torque, picked),
+        |((first, force, torque, mass), picked)| {
+            sum_range(&tables, pick, first, force, torque, mass, g, picked)
+        },
     );
     if !wall_force.is_empty() {
         for &(bodies, forces) in &tables {
@@ -663,9 +673,10 @@ pub fn apply_contact_forces(
     }
 }
 
-/// One thread's share of [`apply_contact_forces`]: zeroes the force and torque totals of
-/// the grains `first..first + force.len()` (in snapshot order) and adds to them, in table
-/// order, the forces and torques of the contacts that touch them.
+/// One thread's share of [`apply_contact_forces`]: sets the force totals of the grains
+/// `first..first + force.len()` (in snapshot order) to their weights m `g` and their torque
+/// totals to zero, and adds to them, in table order, the forces and torques of the
+/// contacts that touch them.
 ///
 /// With `pick` (two or more threads), every contact's two bodies are first tested against
 /// the range without a branch, each side in range appended to `picked` as
@@ -676,16 +687,23 @@ pub fn apply_contact_forces(
 /// stage took as long on two threads as on one. On one thread every branch is predicted
 /// and picking would only add a pass. Either way the sums are taken in the same order.
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 fn sum_range(
     tables: &[(&[ContactBodies], &[ContactForce])],
     pick: bool,
     first: usize,
     force: &mut [Force],
     torque: &mut [Torque],
+    mass: &[Mass],
+    g: DVec3,
     picked: &mut Vec<u32>,
 ) {
     let len = force.len();
-    force.fill(Force(DVec3::ZERO));
+    // The totals start from the weight m g: the gravity of `SimBuilder::gravity_in_force_sums`,
+    // which then needs no pass of its own over the grains.
+    for (f, m) in force.iter_mut().zip(mass) {
+        f.0 = g * m.0;
+    }
     torque.fill(Torque(DVec3::ZERO));
     // Adds one side of a contact; `b_side` for the second body, whose force is opposite.
     let add = |force: &mut [Force],

@@ -105,6 +105,10 @@ pub struct SimBuilder {
     pub world: World,
     schedule: Schedule,
     plan: Plan,
+    /// Whether a plugin adds the weights m g into the grains' force totals as it sums
+    /// them ([`Self::gravity_in_force_sums`]); otherwise [`Self::build`] schedules the
+    /// `gravity` pass.
+    gravity_in_sums: bool,
 }
 
 impl SimBuilder {
@@ -123,7 +127,6 @@ impl SimBuilder {
         world.insert_resource(GrainSnapshot::default());
         let rotation = config.rotation;
         let integrator = config.integrator;
-        let gravity_on = config.gravity != glam::DVec3::ZERO;
         world.insert_resource(config);
 
         let mut schedule = Schedule::new(StepSchedule);
@@ -150,6 +153,7 @@ impl SimBuilder {
                 stages: Stage::ALL.iter().map(|s| (*s, Vec::new())).collect(),
                 ..Plan::default()
             },
+            gravity_in_sums: false,
         };
         for stage in Stage::ALL {
             builder.add_hidden(stage, mark_stage(stage));
@@ -188,9 +192,6 @@ impl SimBuilder {
             "gather_snapshot",
             snapshot::gather_snapshot,
         );
-        if gravity_on {
-            builder.add_system(Stage::BodyForces, "gravity", integrate::gravity);
-        }
         if gear {
             builder.add_system(
                 Stage::IntegrateVelocities,
@@ -296,8 +297,23 @@ impl SimBuilder {
         &self.plan
     }
 
+    /// Declares that the system which overwrites the grains' force totals each step with
+    /// the sum of their contact forces starts each total from the grain's weight m g
+    /// (`SimConfig::gravity`), so that gravity needs no pass of its own over the grains
+    /// (the contact crate's force sums do). Without such a system, [`Self::build`]
+    /// schedules the `gravity` system in [`Stage::BodyForces`].
+    pub fn gravity_in_force_sums(&mut self) {
+        self.gravity_in_sums = true;
+        if self.config().gravity != glam::DVec3::ZERO {
+            self.note("gravity: each grain's force total starts from its weight m g in the force sums (no pass of its own)");
+        }
+    }
+
     /// Finishes the simulation. Initial forces are evaluated on the first step call.
     pub fn build(mut self) -> Simulation {
+        if self.config().gravity != glam::DVec3::ZERO && !self.gravity_in_sums {
+            self.add_system(Stage::BodyForces, "gravity", integrate::gravity);
+        }
         self.world.remove_resource::<SlotCounts>();
         Simulation {
             world: self.world,
