@@ -72,7 +72,7 @@ pub enum Command {
 /// block freed (up to 32 MiB): after a scene's build frees its large buffers, the
 /// snapshot's and the tables' arrays land in the heap instead, where the holes their
 /// growth leaves are never returned. Fixing it at glibc's initial 128 KiB brings the peak
-/// resident memory of the 512,000-grain chute down by 4 % (docs/performance.md); the run
+/// resident memory of the 512,000-grain chute down by 4 % (docs/performance-log.md); the run
 /// allocates nothing that large per step, so it costs no page faults.
 fn fix_mmap_threshold() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]

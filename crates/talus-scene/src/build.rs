@@ -1763,7 +1763,7 @@ fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), Sc
 
 /// Orders grains along a Z-order (Morton) curve through cells one largest diameter wide
 /// (LAMMPS sorts its atoms by bins in row order; on the 512,000-grain chute the two orders
-/// run within 3 % of each other, docs/performance.md session 16): grains close in space are
+/// run within 3 % of each other, docs/performance-log.md, session 16): grains close in space are
 /// then close in memory, so the neighbour search, the contact loop and the force sums read
 /// and write nearby memory.
 /// A stable sort of a fixed key: the order is a function of the positions alone.
