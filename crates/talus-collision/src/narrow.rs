@@ -12,6 +12,13 @@
 //! contacts). Which contacts may end is not found by testing every live contact again:
 //! the force loops list those that carried no force ([`IdleContacts`]), and only those
 //! are tested.
+//!
+//! Only what changes the world's tables is serial: recycling, spawning and despawning
+//! contact entities, and the table sorts' permutations (two jobs). The rest of a
+//! contact's life runs in parallel by chunk of grains, each chunk owning its slice of the
+//! index: finding new pairs and what they need from the snapshot, ending idle contacts,
+//! looking up the rows of ended ones, entering new ones and re-pointing entries after a
+//! sort. On two threads each serial stretch leaves the other thread waiting.
 
 use bevy_ecs::archetype::ArchetypeId;
 use bevy_ecs::prelude::*;
@@ -28,6 +35,19 @@ use talus_core::snapshot::{GrainSnapshot, prefetch_item};
 
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, CandidateChunk, NeighbourList};
+
+/// A touching pair without a contact, as the narrow phase's parallel pass found it: its
+/// bodies' dense indices (or wall code), its slot among its chunk's candidates, the index
+/// of its law in [`ContactLawTable::slots`] and its [`Contact`] (what a new contact needs
+/// from the snapshot, read while the chunk's grains are in cache).
+#[derive(Clone, Copy, Debug)]
+struct NewPair {
+    i: u32,
+    j: u32,
+    slot: u32,
+    law: u32,
+    contact: Contact,
+}
 
 /// The live contacts entered under one grain. Two fit inline (16 bytes each, 40 bytes
 /// with the length). The narrow phase's pair tests do not read these lists (the live bits
@@ -112,7 +132,12 @@ pub struct ContactIndex {
     live_build: Option<u64>,
     /// Per chunk of grains: the touching pairs that have no contact yet, with their slots
     /// in the chunk's candidates (scratch).
-    new_pairs: Vec<Vec<(u32, u32, u32)>>,
+    new_pairs: Vec<Vec<NewPair>>,
+    /// Per chunk of grains: the idle contacts ([`IdleContacts`]) whose first body is in
+    /// the chunk, as (first body, partner) (scratch).
+    idle_pairs: Vec<Vec<(u32, u32)>>,
+    /// Per chunk of grains: the contacts that ended in the pass (scratch).
+    ended: Vec<Vec<Entity>>,
     /// Spawn every new contact and despawn every ended one, instead of handing ended
     /// contacts to new pairs of their law (off by default; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
@@ -264,12 +289,18 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain,
         new_pairs,
+        idle_pairs,
+        ended: ended_by_chunk,
         live,
         live_build,
         ..
     } = index;
     if new_pairs.len() < chunks {
         new_pairs.resize_with(chunks, Vec::new);
+    }
+    if idle_pairs.len() < chunks {
+        idle_pairs.resize_with(chunks, Vec::new);
+        ended_by_chunk.resize_with(chunks, Vec::new);
     }
     if *live_build != Some(list.builds) || live.len() < chunks {
         // A new list (or a re-keyed index): each contact's pair is found among its
@@ -282,52 +313,90 @@ fn update_contacts_inner(
             .for_each(|((entries, candidates), bits)| mark_live(entries, candidates, bits));
         *live_build = Some(list.builds);
     }
-    // Each chunk of grains owns its slice of the index: the overlap tests and the listing
-    // of new pairs run in parallel; only spawning and despawning entities, which change
-    // the world's tables, are serial.
-    let per_grain_view: &[GrainContacts] = per_grain;
-    per_grain_view
-        .par_chunks(CHUNK)
+    // A contact ends when its bodies neither touch now nor carried a force at its last
+    // evaluation (one that did is kept for one more evaluation, so that its law books the
+    // work of the step in which it ended). The force loops listed those that carried
+    // none: each is handed to the chunk of its first body, whose pass tests it after its
+    // new pairs (while the chunk's contact lists, live bits and grains are in cache) and
+    // removes it from the index if it ended. After a re-keying or a restore every contact
+    // is checked instead, below.
+    for bucket in &mut idle_pairs[..chunks] {
+        bucket.clear();
+    }
+    if !check_all {
+        for &[a, b] in &idle.pairs {
+            let (key, partner) = first_in_order(a, b);
+            idle_pairs[key as usize / CHUNK].push((key, partner));
+        }
+    }
+    // Each chunk of grains owns its slice of the index: the overlap tests, the listing
+    // of new pairs and the ending of idle contacts run in parallel; only spawning and
+    // despawning entities, which change the world's tables, are serial.
+    per_grain
+        .par_chunks_mut(CHUNK)
         .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
-        .zip(live[..chunks].par_iter())
+        .zip(live[..chunks].par_iter_mut())
+        .zip(idle_pairs[..chunks].par_iter())
+        .zip(ended_by_chunk[..chunks].par_iter_mut())
         .enumerate()
         // Chunks differ in cost (dense and dilute regions, the frozen base): small jobs,
         // which idle threads steal, even the threads' shares out.
         .with_max_len(2)
-        .for_each(|(chunk, (((entries, candidates), new), live))| {
-            let pass_state = PassState {
-                s,
-                table,
-                range,
-                gap_threshold: list.gap_threshold(chunk, s),
-            };
-            // While this chunk is tested, the next chunk's contact lists and grains are
-            // asked for, a few lines per batch of pairs: a chunk's pairs read them in no
-            // order the hardware can follow, and a large packing's do not fit in cache.
-            let mut ahead = talus_core::snapshot::LinePrefetcher::new();
-            let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
-            if !next.is_empty() {
-                // The gaps first: the search for the chunk's tested prefix reads them
-                // in a chain of dependent loads.
-                ahead.add(&list.chunks[chunk + 1].gap);
-                ahead.add(&s.records[next]);
-            }
-            narrow_chunk(
-                &pass_state,
-                chunk * CHUNK,
-                entries,
-                candidates,
-                live,
-                new,
-                &mut ahead,
-            );
-        });
-    // A contact ends when its bodies neither touch now nor carried a force at its last
-    // evaluation (one that did is kept for one more evaluation, so that its law books the
-    // work of the step in which it ended). Those that did not are few, and the force
-    // loops listed them.
-    let mut ended: Vec<Entity> = Vec::new();
+        .for_each(
+            |(chunk, (((((entries, candidates), new), live), idle), ended))| {
+                let pass_state = PassState {
+                    s,
+                    table,
+                    range,
+                    gap_threshold: list.gap_threshold(chunk, s),
+                };
+                // While this chunk is tested, the next chunk's contact lists and grains
+                // are asked for, a few lines per batch of pairs: a chunk's pairs read
+                // them in no order the hardware can follow, and a large packing's do not
+                // fit in cache.
+                let mut ahead = talus_core::snapshot::LinePrefetcher::new();
+                let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
+                if !next.is_empty() {
+                    // The gaps first: the search for the chunk's tested prefix reads them
+                    // in a chain of dependent loads.
+                    ahead.add(&list.chunks[chunk + 1].gap);
+                    ahead.add(&s.records[next]);
+                }
+                let base = chunk * CHUNK;
+                // The idle contacts' partners are anywhere in the packing: asked for now,
+                // they arrive while the chunk's pairs are tested.
+                for &(_, partner) in idle {
+                    if (partner as usize) < n {
+                        prefetch_item(&s.records, partner as usize);
+                    }
+                }
+                narrow_chunk(
+                    &pass_state,
+                    base,
+                    entries,
+                    candidates,
+                    live,
+                    new,
+                    &mut ahead,
+                );
+                ended.clear();
+                for &(key, partner) in idle {
+                    if touching(s, range, key as usize, partner) {
+                        continue;
+                    }
+                    let entries = &mut entries[key as usize - base];
+                    if let Some(k) = entries.iter().position(|e| e.partner == partner) {
+                        let entry = entries.remove(k);
+                        ended.push(entry.contact());
+                        clear_live(live, entry.slot);
+                    }
+                }
+            },
+        );
+    // The contacts the chunks ended, in chunk order (the order they are handed out in is
+    // set below by their rows, not by this one).
+    let mut ended: Vec<Entity> = ended_by_chunk[..chunks].iter().flatten().copied().collect();
     let view: &World = world;
     if check_all {
         for (key, entries) in per_grain.iter_mut().enumerate() {
@@ -344,28 +413,6 @@ fn update_contacts_inner(
                 keep
             });
         }
-    } else {
-        // The pairs' grains and contact lists are all over the packing: each pair asks
-        // for those of the pair a few ahead.
-        let mut ahead = idle.pairs.iter().skip(LISTS_AHEAD);
-        for &[a, b] in &idle.pairs {
-            if let Some(&[a, b]) = ahead.next() {
-                let (key, partner) = first_in_order(a, b);
-                prefetch_item(per_grain, key as usize);
-                prefetch_item(&s.records, key as usize);
-                prefetch_item(&s.records, partner as usize);
-            }
-            let (key, partner) = first_in_order(a, b);
-            if touching(s, range, key as usize, partner) {
-                continue;
-            }
-            let entries = &mut per_grain[key as usize];
-            if let Some(k) = entries.iter().position(|e| e.partner == partner) {
-                let entry = entries.remove(k);
-                ended.push(entry.contact());
-                set_live(live, key as usize, entry.slot, false);
-            }
-        }
     }
     // The list is read; its allocation goes back for the next force pass to fill.
     let mut pairs = idle.pairs;
@@ -381,10 +428,14 @@ fn update_contacts_inner(
     // entity ids, so a resumed run makes the same choices.
     orphans.retain(|&c| world.get_entity(c).is_ok());
     orphans.extend(ended);
+    // Each look-up of a contact's row misses the cache (the contacts are all over the
+    // packing): in parallel, which keeps the other threads busy in this serial stretch.
+    let view: &World = world;
     let mut ended_at: Vec<(ArchetypeId, usize, Entity)> = orphans
-        .iter()
+        .par_iter()
+        .with_min_len(LOOKUPS_PER_JOB)
         .map(|&c| {
-            let at = world.entity(c).location();
+            let at = view.entity(c).location();
             (at.archetype_id, at.table_row.index(), c)
         })
         .collect();
@@ -411,7 +462,10 @@ fn update_contacts_inner(
         ..
     } = index;
     let mut reused = vec![false; ended_at.len()];
-    let mut to_spawn: Vec<(u32, u32, u32, Contact, &LawSlot)> = Vec::new();
+    let mut to_spawn: Vec<(usize, u32, u32, Contact, &LawSlot)> = Vec::new();
+    // The contact each new pair gets, in the order of the pairs (chunk by chunk): the
+    // index's entries are made from it after the spawns, in parallel by chunk.
+    let mut given: Vec<Entity> = Vec::new();
     // A new contact knows its bodies' places in this step's snapshot, which the force loop
     // reads next: its first evaluation goes through the law's lane form like any other.
     let bodies_of = |i: u32, j: u32| ContactBodies {
@@ -419,32 +473,17 @@ fn update_contacts_inner(
         b: j,
         layout: s.layout,
     };
-    let mut ahead = new_pairs[..chunks].iter().flatten().skip(LISTS_AHEAD);
-    for &(i, j, slot) in new_pairs[..chunks].iter().flatten() {
-        if let Some(&(i, _, _)) = ahead.next() {
-            prefetch_item(per_grain, i as usize);
-        }
-        let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
-            let wall = &s.walls[k];
-            (wall.entity, wall.material, ContactKind::GrainWall)
-        } else {
-            (
-                s.entity[j as usize],
-                s.material[j as usize],
-                ContactKind::GrainGrain,
-            )
-        };
-        let law = table
-            .get(s.material[i as usize], material_b)
+    for (k, new) in new_pairs[..chunks].iter().flatten().enumerate() {
+        let NewPair {
+            i,
+            j,
+            law,
+            contact: pair,
+            ..
+        } = *new;
+        let law = table.slots[law as usize]
+            .as_ref()
             .expect("the parallel pass kept only interacting pairs");
-        // The grain first in dense order is `a` (never the entity ids, which depend on
-        // the history of spawns: a restored run must choose alike).
-        let pair = Contact {
-            a: s.entity[i as usize],
-            b,
-            kind,
-            pair_slot: law.pair_slot,
-        };
         let group = reusable
             .iter_mut()
             .find(|g| g.archetype == law.archetype && g.next < g.end);
@@ -454,10 +493,10 @@ fn update_contacts_inner(
             group.next += 1;
             group.reuses.push((contact, row, pair, bodies_of(i, j)));
             group.recycle = Some(law.recycle);
-            per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
-            set_live(live, i as usize, slot, true);
+            given.push(contact);
         } else {
-            to_spawn.push((i, j, slot, pair, law));
+            given.push(Entity::PLACEHOLDER);
+            to_spawn.push((k, i, j, pair, law));
         }
     }
     for group in &reusable {
@@ -481,11 +520,32 @@ fn update_contacts_inner(
     for &(_, c) in &removals {
         world.despawn(c);
     }
-    for (i, j, slot, pair, law) in to_spawn {
-        let contact = (law.spawn)(world, pair, bodies_of(i, j));
-        per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
-        set_live(live, i as usize, slot, true);
+    for (k, i, j, pair, law) in to_spawn {
+        given[k] = (law.spawn)(world, pair, bodies_of(i, j));
     }
+    // Each chunk enters its new pairs' contacts under their first grains and sets their
+    // live bits: the grains' lists are all over the packing and miss the cache.
+    let mut firsts = Vec::with_capacity(chunks);
+    let mut first = 0;
+    for new in &new_pairs[..chunks] {
+        firsts.push(first);
+        first += new.len();
+    }
+    let given = &given;
+    per_grain
+        .par_chunks_mut(CHUNK)
+        .zip(live[..chunks].par_iter_mut())
+        .zip(new_pairs[..chunks].par_iter())
+        .zip(firsts.par_iter())
+        .enumerate()
+        .with_max_len(ENTRY_CHUNKS_PER_JOB)
+        .for_each(|(chunk, (((entries, live), new), &first))| {
+            let base = chunk * CHUNK;
+            for (pair, &contact) in new.iter().zip(&given[first..]) {
+                entries[pair.i as usize - base].push(IndexEntry::new(pair.j, contact, pair.slot));
+                set_chunk_live(live, pair.slot);
+            }
+        });
     if world
         .resource::<Clock>()
         .step
@@ -537,20 +597,54 @@ pub fn sort_contacts(world: &mut World, index: &mut ContactIndex, s: &GrainSnaps
     // A sorted law's every contact has its bodies in `s`'s layout; an unsorted law's
     // contacts did not move, and any whose bodies are of another layout is skipped.
     let mut contacts = world.query::<(Entity, &ContactBodies)>();
-    for (contact, bodies) in contacts.iter(world) {
-        if bodies.layout != s.layout {
-            continue;
-        }
-        let (key, partner) = first_in_order(bodies.a, bodies.b);
-        if let Some(entry) = index
-            .per_grain
-            .get_mut(key as usize)
-            .and_then(|list| list.iter_mut().find(|e| e.partner == partner))
-        {
-            entry.set_contact(contact);
+    let contacts = contacts.query(world);
+    let per_grain = &mut index.per_grain;
+    let key_of = |bodies: &ContactBodies| first_in_order(bodies.a, bodies.b).0;
+    for (entities, bodies) in contacts.contiguous_iter().expect("contact query is dense") {
+        let in_order = bodies.par_iter().all(|b| b.layout == s.layout)
+            && bodies
+                .par_windows(2)
+                .all(|w| key_of(&w[0]) <= key_of(&w[1]));
+        if in_order {
+            // A table in the order of its contacts' keys (as a sort leaves it): each
+            // range of grains' lists is re-pointed, in parallel, from the rows whose
+            // keys fall in the range, found by bisection.
+            per_grain
+                .par_chunks_mut(REPOINT_GRAINS)
+                .enumerate()
+                .for_each(|(part, lists)| {
+                    let first = part * REPOINT_GRAINS;
+                    let rows = bodies.partition_point(|b| (key_of(b) as usize) < first)
+                        ..bodies.partition_point(|b| (key_of(b) as usize) < first + lists.len());
+                    for (&contact, b) in entities[rows.clone()].iter().zip(&bodies[rows]) {
+                        repoint(lists, first, b, contact);
+                    }
+                });
+        } else {
+            for (&contact, b) in entities.iter().zip(bodies) {
+                if b.layout == s.layout {
+                    repoint(per_grain, 0, b, contact);
+                }
+            }
         }
     }
     moved
+}
+
+/// Grains whose contact lists one job of [`sort_contacts`] re-points.
+const REPOINT_GRAINS: usize = 16 * CHUNK;
+
+/// Points the entry of the pair of `bodies` (a contact in `s`'s layout) in `lists` (the
+/// contact lists of the grains from `first`) at `contact`, the entity that now holds it.
+#[inline]
+fn repoint(lists: &mut [GrainContacts], first: usize, bodies: &ContactBodies, contact: Entity) {
+    let (key, partner) = first_in_order(bodies.a, bodies.b);
+    if let Some(entry) = lists
+        .get_mut((key as usize).wrapping_sub(first))
+        .and_then(|list| list.iter_mut().find(|e| e.partner == partner))
+    {
+        entry.set_contact(contact);
+    }
 }
 
 /// Finds each contact of a chunk of grains among the chunk's candidate pairs: sets the
@@ -590,6 +684,74 @@ fn set_live(live: &mut [Vec<u64>], key: usize, slot: u32, on: bool) {
     }
 }
 
+/// Lists a touching pair without a contact in `new` ([`NewPair`]) if its materials
+/// interact. Out of line: the pass's test loop meets it about once in a hundred pairs,
+/// and inlined it would crowd the loop's registers.
+#[cold]
+#[inline(never)]
+fn push_new_pair(
+    s: &GrainSnapshot,
+    table: &ContactLawTable,
+    i: usize,
+    partner: u32,
+    slot: u32,
+    new: &mut Vec<NewPair>,
+) {
+    let (b, material_b, kind) = match ContactBodies::wall_of(partner) {
+        Some(w) => {
+            let wall = &s.walls[w];
+            (wall.entity, wall.material, ContactKind::GrainWall)
+        }
+        None => (
+            s.entity[partner as usize],
+            s.material[partner as usize],
+            ContactKind::GrainGrain,
+        ),
+    };
+    let law = s.material[i] as usize * table.n_materials + material_b as usize;
+    if let Some(Some(law_slot)) = table.slots.get(law) {
+        // The grain first in dense order is `a` (never the entity ids, which depend on
+        // the history of spawns: a restored run must choose alike).
+        new.push(NewPair {
+            i: i as u32,
+            j: partner,
+            slot,
+            law: law as u32,
+            contact: Contact {
+                a: s.entity[i],
+                b,
+                kind,
+                pair_slot: law_slot.pair_slot,
+            },
+        });
+    }
+}
+
+/// Sets the live bit of the candidate pair at `slot` of a chunk whose bits are `live`
+/// (nothing for [`NO_SLOT`]).
+#[inline]
+fn set_chunk_live(live: &mut [u64], slot: u32) {
+    if slot != NO_SLOT {
+        live[slot as usize / 64] |= 1 << (slot % 64);
+    }
+}
+
+/// Ended contacts whose rows one job of the narrow phase looks up.
+const LOOKUPS_PER_JOB: usize = 64;
+
+/// Chunks of grains one job of the narrow phase enters new contacts for (most chunks
+/// have a few new pairs a step: one chunk a job would cost more in scheduling).
+const ENTRY_CHUNKS_PER_JOB: usize = 16;
+
+/// Clears the live bit of the candidate pair at `slot` of a chunk whose bits are `live`
+/// (nothing for [`NO_SLOT`]).
+#[inline]
+fn clear_live(live: &mut [u64], slot: u32) {
+    if slot != NO_SLOT {
+        live[slot as usize / 64] &= !(1 << (slot % 64));
+    }
+}
+
 /// What every chunk of the narrow phase's parallel pass reads.
 struct PassState<'a> {
     s: &'a GrainSnapshot,
@@ -617,10 +779,6 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
     }
 }
 
-/// How many pairs ahead the serial loops over ended and new contacts ask for the grains'
-/// contact lists (and records).
-const LISTS_AHEAD: usize = 8;
-
 /// How many pairs ahead [`narrow_chunk`] asks for the partners' positions and radii.
 const PARTNERS_AHEAD: usize = 32;
 
@@ -638,7 +796,7 @@ fn narrow_chunk(
     entries: &[GrainContacts],
     candidates: &CandidateChunk,
     live: &[u64],
-    new: &mut Vec<(u32, u32, u32)>,
+    new: &mut Vec<NewPair>,
     ahead: &mut talus_core::snapshot::LinePrefetcher,
 ) {
     let PassState {
@@ -664,13 +822,7 @@ fn narrow_chunk(
             "a live pair without its bit"
         );
         if slot != NO_SLOT || !known(partner) {
-            let material_b = match ContactBodies::wall_of(partner) {
-                Some(w) => s.walls[w].material,
-                None => s.material[partner as usize],
-            };
-            if table.get(s.material[i], material_b).is_some() {
-                new.push((i as u32, partner, slot));
-            }
+            push_new_pair(s, table, i, partner, slot, new);
         }
     };
     let tested = candidates.within_threshold(gap_threshold);
@@ -741,5 +893,5 @@ fn narrow_chunk(
     // By grain, then partner (wall codes after every grain's index), as one pass over
     // the grains in index order would list them: where and when the list was built never
     // shows in the order contacts are made (and forces summed).
-    new.sort_unstable();
+    new.sort_unstable_by_key(|pair| (pair.i, pair.j));
 }

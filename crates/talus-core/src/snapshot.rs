@@ -573,12 +573,8 @@ pub fn gather_snapshot(
         let table_start = k;
         let range = k..k + e.len();
         k += e.len();
-        // Unchanged entities (the common case) need no copy.
-        if reordered || s.entity[range.clone()] != *e {
-            reordered = true;
-            s.entity[range.clone()].copy_from_slice(e);
-        }
-        let (records, omega, material) = (
+        let (entity, records, omega, material) = (
+            &mut s.entity[range.clone()],
             &mut s.records[range.clone()],
             &mut s.omega[range.clone()],
             &mut s.material[range.clone()],
@@ -589,7 +585,7 @@ pub fn gather_snapshot(
             &[]
         };
         chunk_results.clear();
-        rayon::join(
+        let ((), entities_changed) = rayon::join(
             || {
                 // Chunks, each a plain loop: rayon's per-item plumbing costs more than a
                 // copy. The largest radius and the moves are taken in the same
@@ -647,8 +643,23 @@ pub fn gather_snapshot(
             || {
                 copy_column(omega, w, |x| x.0);
                 copy_column(material, mat, |x| x.0);
+                // Unchanged entities (the common case) need no copy; compared in
+                // parallel chunks, since on one thread the comparison of a large
+                // packing's entities would keep the other threads waiting.
+                entity
+                    .par_chunks_mut(COPY_CHUNK)
+                    .zip(e.par_chunks(COPY_CHUNK))
+                    .map(|(kept, now)| {
+                        let changed = kept != now;
+                        if changed {
+                            kept.copy_from_slice(now);
+                        }
+                        changed
+                    })
+                    .reduce(|| false, |a, b| a || b)
             },
         );
+        reordered |= entities_changed;
         // Maxima and minima: the same on any number of threads.
         for (largest_radius, blocks) in chunk_results.drain(..) {
             s.max_radius = s.max_radius.max(largest_radius);
