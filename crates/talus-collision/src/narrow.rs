@@ -13,11 +13,12 @@
 //! the force loops list those that carried no force ([`IdleContacts`]), and only those
 //! are tested.
 //!
-//! Only what changes the world's tables is serial: recycling, spawning and despawning
-//! contact entities, and the table sorts' permutations (two jobs). The rest of a
-//! contact's life runs in parallel by chunk of grains, each chunk owning its slice of the
-//! index: finding new pairs and what they need from the snapshot, ending idle contacts,
-//! looking up the rows of ended ones, entering new ones and re-pointing entries after a
+//! Serial: ending idle contacts (few, their reads asked for ahead), handing ended
+//! contacts to new pairs, recycling, spawning and despawning contact entities (which
+//! change the world's tables), and the table sorts' permutations (two jobs). The rest of
+//! a contact's life runs in parallel by chunk of grains, each chunk owning its slice of
+//! the index: finding new pairs and what they need from the snapshot, looking up the rows
+//! of ended contacts, entering new ones in the index and re-pointing entries after a
 //! sort. On two threads each serial stretch leaves the other thread waiting.
 
 use bevy_ecs::archetype::ArchetypeId;
@@ -133,11 +134,6 @@ pub struct ContactIndex {
     /// Per chunk of grains: the touching pairs that have no contact yet, with their slots
     /// in the chunk's candidates (scratch).
     new_pairs: Vec<Vec<NewPair>>,
-    /// Per chunk of grains: the idle contacts ([`IdleContacts`]) whose first body is in
-    /// the chunk, as (first body, partner) (scratch).
-    idle_pairs: Vec<Vec<(u32, u32)>>,
-    /// Per chunk of grains: the contacts that ended in the pass (scratch).
-    ended: Vec<Vec<Entity>>,
     /// Spawn every new contact and despawn every ended one, instead of handing ended
     /// contacts to new pairs of their law (off by default; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
@@ -289,18 +285,12 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain,
         new_pairs,
-        idle_pairs,
-        ended: ended_by_chunk,
         live,
         live_build,
         ..
     } = index;
     if new_pairs.len() < chunks {
         new_pairs.resize_with(chunks, Vec::new);
-    }
-    if idle_pairs.len() < chunks {
-        idle_pairs.resize_with(chunks, Vec::new);
-        ended_by_chunk.resize_with(chunks, Vec::new);
     }
     if *live_build != Some(list.builds) || live.len() < chunks {
         // A new list (or a re-keyed index): each contact's pair is found among its
@@ -313,92 +303,78 @@ fn update_contacts_inner(
             .for_each(|((entries, candidates), bits)| mark_live(entries, candidates, bits));
         *live_build = Some(list.builds);
     }
-    // A contact ends when its bodies neither touch now nor carried a force at its last
-    // evaluation (one that did is kept for one more evaluation, so that its law books the
-    // work of the step in which it ended). The force loops listed those that carried
-    // none: each is handed to the chunk of its first body, whose pass tests it after its
-    // new pairs (while the chunk's contact lists, live bits and grains are in cache) and
-    // removes it from the index if it ended. After a re-keying or a restore every contact
-    // is checked instead, below.
-    for bucket in &mut idle_pairs[..chunks] {
-        bucket.clear();
-    }
-    if !check_all {
-        for &[a, b] in &idle.pairs {
-            let (key, partner) = first_in_order(a, b);
-            idle_pairs[key as usize / CHUNK].push((key, partner));
-        }
-    }
-    // Each chunk of grains owns its slice of the index: the overlap tests, the listing
-    // of new pairs and the ending of idle contacts run in parallel; only spawning and
-    // despawning entities, which change the world's tables, are serial.
+    // Each chunk of grains owns its slice of the index: the overlap tests and the listing
+    // of new pairs (with what a new contact needs from the snapshot) run in parallel.
     per_grain
         .par_chunks_mut(CHUNK)
         .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
-        .zip(live[..chunks].par_iter_mut())
-        .zip(idle_pairs[..chunks].par_iter())
-        .zip(ended_by_chunk[..chunks].par_iter_mut())
+        .zip(live[..chunks].par_iter())
         .enumerate()
         // Chunks differ in cost (dense and dilute regions, the frozen base): small jobs,
         // which idle threads steal, even the threads' shares out.
         .with_max_len(2)
-        .for_each(
-            |(chunk, (((((entries, candidates), new), live), idle), ended))| {
-                let pass_state = PassState {
-                    s,
-                    table,
-                    range,
-                    gap_threshold: list.gap_threshold(chunk, s),
-                };
-                // While this chunk is tested, the next chunk's contact lists and grains
-                // are asked for, a few lines per batch of pairs: a chunk's pairs read
-                // them in no order the hardware can follow, and a large packing's do not
-                // fit in cache.
-                let mut ahead = talus_core::snapshot::LinePrefetcher::new();
-                let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
-                if !next.is_empty() {
-                    // The gaps first: the search for the chunk's tested prefix reads them
-                    // in a chain of dependent loads.
-                    ahead.add(&list.chunks[chunk + 1].gap);
-                    ahead.add(&s.records[next]);
-                }
-                let base = chunk * CHUNK;
-                // The idle contacts' partners are anywhere in the packing: asked for now,
-                // they arrive while the chunk's pairs are tested.
-                for &(_, partner) in idle {
-                    if (partner as usize) < n {
-                        prefetch_item(&s.records, partner as usize);
-                    }
-                }
-                narrow_chunk(
-                    &pass_state,
-                    base,
-                    entries,
-                    candidates,
-                    live,
-                    new,
-                    &mut ahead,
-                );
-                ended.clear();
-                for &(key, partner) in idle {
-                    if touching(s, range, key as usize, partner) {
-                        continue;
-                    }
-                    let entries = &mut entries[key as usize - base];
-                    if let Some(k) = entries.iter().position(|e| e.partner == partner) {
-                        let entry = entries.remove(k);
-                        ended.push(entry.contact());
-                        clear_live(live, entry.slot);
-                    }
-                }
-            },
-        );
-    // The contacts the chunks ended, in chunk order (the order they are handed out in is
-    // set below by their rows, not by this one).
-    let mut ended: Vec<Entity> = ended_by_chunk[..chunks].iter().flatten().copied().collect();
+        .for_each(|(chunk, (((entries, candidates), new), live))| {
+            let pass_state = PassState {
+                s,
+                table,
+                range,
+                gap_threshold: list.gap_threshold(chunk, s),
+            };
+            // While this chunk is tested, the next chunk's contact lists and grains
+            // are asked for, a few lines per batch of pairs: a chunk's pairs read
+            // them in no order the hardware can follow, and a large packing's do not
+            // fit in cache.
+            let mut ahead = talus_core::snapshot::LinePrefetcher::new();
+            let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
+            if !next.is_empty() {
+                // The gaps first: the search for the chunk's tested prefix reads them
+                // in a chain of dependent loads.
+                ahead.add(&list.chunks[chunk + 1].gap);
+                ahead.add(&s.records[next]);
+            }
+            let base = chunk * CHUNK;
+            narrow_chunk(
+                &pass_state,
+                base,
+                entries,
+                candidates,
+                live,
+                new,
+                &mut ahead,
+            );
+        });
+    // A contact ends when its bodies neither touch now nor carried a force at its last
+    // evaluation (one that did is kept for one more evaluation, so that its law books the
+    // work of the step in which it ended). Those that did not are few, and the force
+    // loops listed them. (Ending them inside the parallel pass, by the chunk of their
+    // first grain, was measured: on one thread it cost more than this loop, whose reads
+    // are asked for ahead; performance-log.md, session 27.)
+    let mut ended: Vec<Entity> = Vec::new();
     let view: &World = world;
-    if check_all {
+    if !check_all {
+        // The pairs' grains and contact lists are all over the packing: each pair asks
+        // for those of the pair a few ahead.
+        let mut ahead = idle.pairs.iter().skip(LISTS_AHEAD);
+        for &[a, b] in &idle.pairs {
+            if let Some(&[a, b]) = ahead.next() {
+                let (key, partner) = first_in_order(a, b);
+                prefetch_item(per_grain, key as usize);
+                prefetch_item(&s.records, key as usize);
+                prefetch_item(&s.records, partner as usize);
+            }
+            let (key, partner) = first_in_order(a, b);
+            if touching(s, range, key as usize, partner) {
+                continue;
+            }
+            let entries = &mut per_grain[key as usize];
+            if let Some(k) = entries.iter().position(|e| e.partner == partner) {
+                let entry = entries.remove(k);
+                ended.push(entry.contact());
+                set_live(live, key as usize, entry.slot, false);
+            }
+        }
+    } else {
         for (key, entries) in per_grain.iter_mut().enumerate() {
             entries.retain(|e| {
                 let keep = touching(s, range, key, e.partner) || {
@@ -541,6 +517,13 @@ fn update_contacts_inner(
         .with_max_len(ENTRY_CHUNKS_PER_JOB)
         .for_each(|(chunk, (((entries, live), new), &first))| {
             let base = chunk * CHUNK;
+            // The chunk's lists and bits are asked for first: they are not in cache.
+            for pair in new {
+                prefetch_item(entries, pair.i as usize - base);
+                if pair.slot != NO_SLOT {
+                    prefetch_item(live, pair.slot as usize / 64);
+                }
+            }
             for (pair, &contact) in new.iter().zip(&given[first..]) {
                 entries[pair.i as usize - base].push(IndexEntry::new(pair.j, contact, pair.slot));
                 set_chunk_live(live, pair.slot);
@@ -743,15 +726,6 @@ const LOOKUPS_PER_JOB: usize = 64;
 /// have a few new pairs a step: one chunk a job would cost more in scheduling).
 const ENTRY_CHUNKS_PER_JOB: usize = 16;
 
-/// Clears the live bit of the candidate pair at `slot` of a chunk whose bits are `live`
-/// (nothing for [`NO_SLOT`]).
-#[inline]
-fn clear_live(live: &mut [u64], slot: u32) {
-    if slot != NO_SLOT {
-        live[slot as usize / 64] &= !(1 << (slot % 64));
-    }
-}
-
 /// What every chunk of the narrow phase's parallel pass reads.
 struct PassState<'a> {
     s: &'a GrainSnapshot,
@@ -778,6 +752,10 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
         }
     }
 }
+
+/// How many pairs ahead the serial loop over idle contacts asks for the grains' contact
+/// lists (and records).
+const LISTS_AHEAD: usize = 8;
 
 /// How many pairs ahead [`narrow_chunk`] asks for the partners' positions and radii.
 const PARTNERS_AHEAD: usize = 32;
