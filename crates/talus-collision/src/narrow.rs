@@ -37,19 +37,6 @@ use talus_core::snapshot::{GrainSnapshot, prefetch_item};
 use crate::grid::CellGrid;
 use crate::neighbours::{CHUNK, CandidateChunk, NeighbourList};
 
-/// A touching pair without a contact, as the narrow phase's parallel pass found it: its
-/// bodies' dense indices (or wall code), its slot among its chunk's candidates, the index
-/// of its law in [`ContactLawTable::slots`] and its [`Contact`] (what a new contact needs
-/// from the snapshot, read while the chunk's grains are in cache).
-#[derive(Clone, Copy, Debug)]
-struct NewPair {
-    i: u32,
-    j: u32,
-    slot: u32,
-    law: u32,
-    contact: Contact,
-}
-
 /// The live contacts entered under one grain. Two fit inline (16 bytes each, 40 bytes
 /// with the length). The narrow phase's pair tests do not read these lists (the live bits
 /// of [`ContactIndex`] stand for them), so a grain with more, whose list is on the heap,
@@ -133,7 +120,7 @@ pub struct ContactIndex {
     live_build: Option<u64>,
     /// Per chunk of grains: the touching pairs that have no contact yet, with their slots
     /// in the chunk's candidates (scratch).
-    new_pairs: Vec<Vec<NewPair>>,
+    new_pairs: Vec<Vec<(u32, u32, u32)>>,
     /// Spawn every new contact and despawn every ended one, instead of handing ended
     /// contacts to new pairs of their law (off by default; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
@@ -449,17 +436,28 @@ fn update_contacts_inner(
         b: j,
         layout: s.layout,
     };
-    for (k, new) in new_pairs[..chunks].iter().flatten().enumerate() {
-        let NewPair {
-            i,
-            j,
-            law,
-            contact: pair,
-            ..
-        } = *new;
-        let law = table.slots[law as usize]
-            .as_ref()
+    for (k, &(i, j, _)) in new_pairs[..chunks].iter().flatten().enumerate() {
+        let (b, material_b, kind) = if let Some(w) = ContactBodies::wall_of(j) {
+            let wall = &s.walls[w];
+            (wall.entity, wall.material, ContactKind::GrainWall)
+        } else {
+            (
+                s.entity[j as usize],
+                s.material[j as usize],
+                ContactKind::GrainGrain,
+            )
+        };
+        let law = table
+            .get(s.material[i as usize], material_b)
             .expect("the parallel pass kept only interacting pairs");
+        // The grain first in dense order is `a` (never the entity ids, which depend on
+        // the history of spawns: a restored run must choose alike).
+        let pair = Contact {
+            a: s.entity[i as usize],
+            b,
+            kind,
+            pair_slot: law.pair_slot,
+        };
         let group = reusable
             .iter_mut()
             .find(|g| g.archetype == law.archetype && g.next < g.end);
@@ -511,23 +509,28 @@ fn update_contacts_inner(
     per_grain
         .par_chunks_mut(CHUNK)
         .zip(live[..chunks].par_iter_mut())
-        .zip(new_pairs[..chunks].par_iter())
+        .zip(new_pairs[..chunks].par_iter_mut())
         .zip(firsts.par_iter())
         .enumerate()
         .with_max_len(ENTRY_CHUNKS_PER_JOB)
         .for_each(|(chunk, (((entries, live), new), &first))| {
             let base = chunk * CHUNK;
             // The chunk's lists and bits are asked for first: they are not in cache.
-            for pair in new {
-                prefetch_item(entries, pair.i as usize - base);
-                if pair.slot != NO_SLOT {
-                    prefetch_item(live, pair.slot as usize / 64);
+            for &(i, _, slot) in new.iter() {
+                prefetch_item(entries, i as usize - base);
+                if slot != NO_SLOT {
+                    prefetch_item(live, slot as usize / 64);
                 }
             }
-            for (pair, &contact) in new.iter().zip(&given[first..]) {
-                entries[pair.i as usize - base].push(IndexEntry::new(pair.j, contact, pair.slot));
-                set_chunk_live(live, pair.slot);
+            for (&(i, j, slot), &contact) in new.iter().zip(&given[first..]) {
+                entries[i as usize - base].push(IndexEntry::new(j, contact, slot));
+                set_chunk_live(live, slot);
             }
+            // A chunk's list is scratch: the priming pass, which makes every contact of
+            // the initial state, would otherwise leave each list holding room for all of
+            // its chunk's contacts for the rest of the run.
+            new.clear();
+            new.shrink_to(KEPT_NEW_PAIRS);
         });
     if world
         .resource::<Clock>()
@@ -667,49 +670,6 @@ fn set_live(live: &mut [Vec<u64>], key: usize, slot: u32, on: bool) {
     }
 }
 
-/// Lists a touching pair without a contact in `new` ([`NewPair`]) if its materials
-/// interact. Out of line: the pass's test loop meets it about once in a hundred pairs,
-/// and inlined it would crowd the loop's registers.
-#[cold]
-#[inline(never)]
-fn push_new_pair(
-    s: &GrainSnapshot,
-    table: &ContactLawTable,
-    i: usize,
-    partner: u32,
-    slot: u32,
-    new: &mut Vec<NewPair>,
-) {
-    let (b, material_b, kind) = match ContactBodies::wall_of(partner) {
-        Some(w) => {
-            let wall = &s.walls[w];
-            (wall.entity, wall.material, ContactKind::GrainWall)
-        }
-        None => (
-            s.entity[partner as usize],
-            s.material[partner as usize],
-            ContactKind::GrainGrain,
-        ),
-    };
-    let law = s.material[i] as usize * table.n_materials + material_b as usize;
-    if let Some(Some(law_slot)) = table.slots.get(law) {
-        // The grain first in dense order is `a` (never the entity ids, which depend on
-        // the history of spawns: a restored run must choose alike).
-        new.push(NewPair {
-            i: i as u32,
-            j: partner,
-            slot,
-            law: law as u32,
-            contact: Contact {
-                a: s.entity[i],
-                b,
-                kind,
-                pair_slot: law_slot.pair_slot,
-            },
-        });
-    }
-}
-
 /// Sets the live bit of the candidate pair at `slot` of a chunk whose bits are `live`
 /// (nothing for [`NO_SLOT`]).
 #[inline]
@@ -718,6 +678,10 @@ fn set_chunk_live(live: &mut [u64], slot: u32) {
         live[slot as usize / 64] |= 1 << (slot % 64);
     }
 }
+
+/// New pairs a chunk's list keeps room for between steps (a step of the chute makes a few
+/// a chunk).
+const KEPT_NEW_PAIRS: usize = 8;
 
 /// Ended contacts whose rows one job of the narrow phase looks up.
 const LOOKUPS_PER_JOB: usize = 64;
@@ -774,7 +738,7 @@ fn narrow_chunk(
     entries: &[GrainContacts],
     candidates: &CandidateChunk,
     live: &[u64],
-    new: &mut Vec<NewPair>,
+    new: &mut Vec<(u32, u32, u32)>,
     ahead: &mut talus_core::snapshot::LinePrefetcher,
 ) {
     let PassState {
@@ -800,7 +764,13 @@ fn narrow_chunk(
             "a live pair without its bit"
         );
         if slot != NO_SLOT || !known(partner) {
-            push_new_pair(s, table, i, partner, slot, new);
+            let material_b = match ContactBodies::wall_of(partner) {
+                Some(w) => s.walls[w].material,
+                None => s.material[partner as usize],
+            };
+            if table.get(s.material[i], material_b).is_some() {
+                new.push((i as u32, partner, slot));
+            }
         }
     };
     let tested = candidates.within_threshold(gap_threshold);
@@ -871,5 +841,5 @@ fn narrow_chunk(
     // By grain, then partner (wall codes after every grain's index), as one pass over
     // the grains in index order would list them: where and when the list was built never
     // shows in the order contacts are made (and forces summed).
-    new.sort_unstable_by_key(|pair| (pair.i, pair.j));
+    new.sort_unstable();
 }
