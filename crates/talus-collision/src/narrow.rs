@@ -12,14 +12,6 @@
 //! contacts). Which contacts may end is not found by testing every live contact again:
 //! the force loops list those that carried no force ([`IdleContacts`]), and only those
 //! are tested.
-//!
-//! Serial: ending idle contacts (few, their reads asked for ahead), handing ended
-//! contacts to new pairs, recycling, spawning and despawning contact entities (which
-//! change the world's tables), and the table sorts' permutations (two jobs). The rest of
-//! a contact's life runs in parallel by chunk of grains, each chunk owning its slice of
-//! the index: finding new pairs and what they need from the snapshot, looking up the rows
-//! of ended contacts, entering new ones in the index and re-pointing entries after a
-//! sort. On two threads each serial stretch leaves the other thread waiting.
 
 use bevy_ecs::archetype::ArchetypeId;
 use bevy_ecs::prelude::*;
@@ -291,9 +283,11 @@ fn update_contacts_inner(
         *live_build = Some(list.builds);
     }
     // Each chunk of grains owns its slice of the index: the overlap tests and the listing
-    // of new pairs (with what a new contact needs from the snapshot) run in parallel.
-    per_grain
-        .par_chunks_mut(CHUNK)
+    // of new pairs run in parallel; only spawning and despawning entities, which change
+    // the world's tables, are serial.
+    let per_grain_view: &[GrainContacts] = per_grain;
+    per_grain_view
+        .par_chunks(CHUNK)
         .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
         .zip(live[..chunks].par_iter())
@@ -308,10 +302,9 @@ fn update_contacts_inner(
                 range,
                 gap_threshold: list.gap_threshold(chunk, s),
             };
-            // While this chunk is tested, the next chunk's contact lists and grains
-            // are asked for, a few lines per batch of pairs: a chunk's pairs read
-            // them in no order the hardware can follow, and a large packing's do not
-            // fit in cache.
+            // While this chunk is tested, the next chunk's contact lists and grains are
+            // asked for, a few lines per batch of pairs: a chunk's pairs read them in no
+            // order the hardware can follow, and a large packing's do not fit in cache.
             let mut ahead = talus_core::snapshot::LinePrefetcher::new();
             let next = (chunk + 1) * CHUNK..((chunk + 2) * CHUNK).min(n);
             if !next.is_empty() {
@@ -320,10 +313,9 @@ fn update_contacts_inner(
                 ahead.add(&list.chunks[chunk + 1].gap);
                 ahead.add(&s.records[next]);
             }
-            let base = chunk * CHUNK;
             narrow_chunk(
                 &pass_state,
-                base,
+                chunk * CHUNK,
                 entries,
                 candidates,
                 live,
@@ -334,12 +326,25 @@ fn update_contacts_inner(
     // A contact ends when its bodies neither touch now nor carried a force at its last
     // evaluation (one that did is kept for one more evaluation, so that its law books the
     // work of the step in which it ended). Those that did not are few, and the force
-    // loops listed them. (Ending them inside the parallel pass, by the chunk of their
-    // first grain, was measured: on one thread it cost more than this loop, whose reads
-    // are asked for ahead; performance-log.md, session 27.)
+    // loops listed them.
     let mut ended: Vec<Entity> = Vec::new();
     let view: &World = world;
-    if !check_all {
+    if check_all {
+        for (key, entries) in per_grain.iter_mut().enumerate() {
+            entries.retain(|e| {
+                let keep = touching(s, range, key, e.partner) || {
+                    view.get::<ContactGeometry>(e.contact())
+                        .zip(view.get::<ContactForce>(e.contact()))
+                        .is_some_and(|(g, f)| f.is_active(g))
+                };
+                if !keep {
+                    ended.push(e.contact());
+                    set_live(live, key, e.slot, false);
+                }
+                keep
+            });
+        }
+    } else {
         // The pairs' grains and contact lists are all over the packing: each pair asks
         // for those of the pair a few ahead.
         let mut ahead = idle.pairs.iter().skip(LISTS_AHEAD);
@@ -361,21 +366,6 @@ fn update_contacts_inner(
                 set_live(live, key as usize, entry.slot, false);
             }
         }
-    } else {
-        for (key, entries) in per_grain.iter_mut().enumerate() {
-            entries.retain(|e| {
-                let keep = touching(s, range, key, e.partner) || {
-                    view.get::<ContactGeometry>(e.contact())
-                        .zip(view.get::<ContactForce>(e.contact()))
-                        .is_some_and(|(g, f)| f.is_active(g))
-                };
-                if !keep {
-                    ended.push(e.contact());
-                    set_live(live, key, e.slot, false);
-                }
-                keep
-            });
-        }
     }
     // The list is read; its allocation goes back for the next force pass to fill.
     let mut pairs = idle.pairs;
@@ -391,14 +381,10 @@ fn update_contacts_inner(
     // entity ids, so a resumed run makes the same choices.
     orphans.retain(|&c| world.get_entity(c).is_ok());
     orphans.extend(ended);
-    // Each look-up of a contact's row misses the cache (the contacts are all over the
-    // packing): in parallel, which keeps the other threads busy in this serial stretch.
-    let view: &World = world;
     let mut ended_at: Vec<(ArchetypeId, usize, Entity)> = orphans
-        .par_iter()
-        .with_min_len(LOOKUPS_PER_JOB)
+        .iter()
         .map(|&c| {
-            let at = view.entity(c).location();
+            let at = world.entity(c).location();
             (at.archetype_id, at.table_row.index(), c)
         })
         .collect();
@@ -425,10 +411,7 @@ fn update_contacts_inner(
         ..
     } = index;
     let mut reused = vec![false; ended_at.len()];
-    let mut to_spawn: Vec<(usize, u32, u32, Contact, &LawSlot)> = Vec::new();
-    // The contact each new pair gets, in the order of the pairs (chunk by chunk): the
-    // index's entries are made from it after the spawns, in parallel by chunk.
-    let mut given: Vec<Entity> = Vec::new();
+    let mut to_spawn: Vec<(u32, u32, u32, Contact, &LawSlot)> = Vec::new();
     // A new contact knows its bodies' places in this step's snapshot, which the force loop
     // reads next: its first evaluation goes through the law's lane form like any other.
     let bodies_of = |i: u32, j: u32| ContactBodies {
@@ -436,9 +419,13 @@ fn update_contacts_inner(
         b: j,
         layout: s.layout,
     };
-    for (k, &(i, j, _)) in new_pairs[..chunks].iter().flatten().enumerate() {
-        let (b, material_b, kind) = if let Some(w) = ContactBodies::wall_of(j) {
-            let wall = &s.walls[w];
+    let mut ahead = new_pairs[..chunks].iter().flatten().skip(LISTS_AHEAD);
+    for &(i, j, slot) in new_pairs[..chunks].iter().flatten() {
+        if let Some(&(i, _, _)) = ahead.next() {
+            prefetch_item(per_grain, i as usize);
+        }
+        let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
+            let wall = &s.walls[k];
             (wall.entity, wall.material, ContactKind::GrainWall)
         } else {
             (
@@ -467,10 +454,10 @@ fn update_contacts_inner(
             group.next += 1;
             group.reuses.push((contact, row, pair, bodies_of(i, j)));
             group.recycle = Some(law.recycle);
-            given.push(contact);
+            per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
+            set_live(live, i as usize, slot, true);
         } else {
-            given.push(Entity::PLACEHOLDER);
-            to_spawn.push((k, i, j, pair, law));
+            to_spawn.push((i, j, slot, pair, law));
         }
     }
     for group in &reusable {
@@ -494,44 +481,11 @@ fn update_contacts_inner(
     for &(_, c) in &removals {
         world.despawn(c);
     }
-    for (k, i, j, pair, law) in to_spawn {
-        given[k] = (law.spawn)(world, pair, bodies_of(i, j));
+    for (i, j, slot, pair, law) in to_spawn {
+        let contact = (law.spawn)(world, pair, bodies_of(i, j));
+        per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
+        set_live(live, i as usize, slot, true);
     }
-    // Each chunk enters its new pairs' contacts under their first grains and sets their
-    // live bits: the grains' lists are all over the packing and miss the cache.
-    let mut firsts = Vec::with_capacity(chunks);
-    let mut first = 0;
-    for new in &new_pairs[..chunks] {
-        firsts.push(first);
-        first += new.len();
-    }
-    let given = &given;
-    per_grain
-        .par_chunks_mut(CHUNK)
-        .zip(live[..chunks].par_iter_mut())
-        .zip(new_pairs[..chunks].par_iter_mut())
-        .zip(firsts.par_iter())
-        .enumerate()
-        .with_max_len(ENTRY_CHUNKS_PER_JOB)
-        .for_each(|(chunk, (((entries, live), new), &first))| {
-            let base = chunk * CHUNK;
-            // The chunk's lists and bits are asked for first: they are not in cache.
-            for &(i, _, slot) in new.iter() {
-                prefetch_item(entries, i as usize - base);
-                if slot != NO_SLOT {
-                    prefetch_item(live, slot as usize / 64);
-                }
-            }
-            for (&(i, j, slot), &contact) in new.iter().zip(&given[first..]) {
-                entries[i as usize - base].push(IndexEntry::new(j, contact, slot));
-                set_chunk_live(live, slot);
-            }
-            // A chunk's list is scratch: the priming pass, which makes every contact of
-            // the initial state, would otherwise leave each list holding room for all of
-            // its chunk's contacts for the rest of the run.
-            new.clear();
-            new.shrink_to(KEPT_NEW_PAIRS);
-        });
     if world
         .resource::<Clock>()
         .step
@@ -670,26 +624,6 @@ fn set_live(live: &mut [Vec<u64>], key: usize, slot: u32, on: bool) {
     }
 }
 
-/// Sets the live bit of the candidate pair at `slot` of a chunk whose bits are `live`
-/// (nothing for [`NO_SLOT`]).
-#[inline]
-fn set_chunk_live(live: &mut [u64], slot: u32) {
-    if slot != NO_SLOT {
-        live[slot as usize / 64] |= 1 << (slot % 64);
-    }
-}
-
-/// New pairs a chunk's list keeps room for between steps (a step of the chute makes a few
-/// a chunk).
-const KEPT_NEW_PAIRS: usize = 8;
-
-/// Ended contacts whose rows one job of the narrow phase looks up.
-const LOOKUPS_PER_JOB: usize = 64;
-
-/// Chunks of grains one job of the narrow phase enters new contacts for (most chunks
-/// have a few new pairs a step: one chunk a job would cost more in scheduling).
-const ENTRY_CHUNKS_PER_JOB: usize = 16;
-
 /// What every chunk of the narrow phase's parallel pass reads.
 struct PassState<'a> {
     s: &'a GrainSnapshot,
@@ -717,8 +651,8 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
     }
 }
 
-/// How many pairs ahead the serial loop over idle contacts asks for the grains' contact
-/// lists (and records).
+/// How many pairs ahead the serial loops over ended and new contacts ask for the grains'
+/// contact lists (and records).
 const LISTS_AHEAD: usize = 8;
 
 /// How many pairs ahead [`narrow_chunk`] asks for the partners' positions and radii.
