@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use crate::components::*;
 use crate::energy::{EnergyLedger, EnergySnapshot};
 use crate::lanes::{F4, V4};
-use crate::resources::{BlowUp, Clock, Health, KineticEnergyDue, SimConfig};
+use crate::resources::{BlowUp, Clock, DeferredKick, Health, KineticEnergyDue, SimConfig};
 
 /// Grains below this count are integrated on one thread: spawning tasks costs more.
 const PARALLEL_THRESHOLD: usize = 4096;
@@ -21,12 +21,17 @@ const PARALLEL_THRESHOLD: usize = 4096;
 const REDUCTION_CHUNK: usize = 1024;
 
 /// First kick and drift: v += a·dt·F/m, then x += dt·v. Also accumulates the work of
-/// gravity over the drift, m g·Δx, which is exact for a uniform field.
+/// gravity over the drift, m g·Δx, which is exact for a uniform field. A second kick the
+/// last step left pending ([`DeferredKick`]) is applied first, grain by grain in the same
+/// pass, and the velocities it leaves are checked finite for the health check (through
+/// the gravity work, which any non-finite velocity makes non-finite).
 #[allow(clippy::type_complexity)]
 pub fn kick_drift_translation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
     mut ledger: ResMut<EnergyLedger>,
+    mut deferred: ResMut<DeferredKick>,
+    mut health: ResMut<Health>,
     mut grains: Query<
         (&mut Position, &mut Velocity, &Force, &Mass),
         (With<Grain>, Without<Frozen>),
@@ -38,12 +43,13 @@ pub fn kick_drift_translation(
     }
     let kick = config.integrator.kick_before_drift() * dt;
     let g = config.gravity;
+    let pending = deferred.translation.take();
     let mut gravity_work = 0.0;
     for (mut p, mut v, f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
         let p = p.bypass_change_detection();
         let v = v.bypass_change_detection();
         let update = |((p, v), (f, m)): ((&mut Position, &mut Velocity), (&Force, &Mass))| {
-            v.0 += f.0 * (kick / m.0);
+            kick_twice(&mut v.0, f.0, m.0, pending, kick);
             let dx = v.0 * dt;
             p.0 += dx;
             m.0 * g.dot(dx)
@@ -74,13 +80,40 @@ pub fn kick_drift_translation(
         };
     }
     ledger.gravity_work += gravity_work;
+    if pending.is_some() {
+        health.motion_finite = gravity_work.is_finite();
+    }
+}
+
+/// Adds to `v` the pending second kick's `F/m` times `pending` (if any), then the first
+/// kick's times `kick`: the operations of the two separate passes, in their order. Under
+/// velocity Verlet the two kicks span the same half step, and their common increment is
+/// computed once (the same bits as computing it twice).
+#[inline(always)]
+fn kick_twice(v: &mut DVec3, f: DVec3, m: f64, pending: Option<f64>, kick: f64) {
+    match pending {
+        Some(first) if first == kick => {
+            let dv = f * (kick / m);
+            *v += dv;
+            *v += dv;
+        }
+        Some(first) => {
+            *v += f * (first / m);
+            *v += f * (kick / m);
+        }
+        None => *v += f * (kick / m),
+    }
 }
 
 /// First rotational kick: ω += a·dt·T/I (spheres need no orientation for contact physics).
+/// A rotational second kick the last step left pending ([`DeferredKick`]) is applied first,
+/// in the same pass, and the spins it leaves are checked finite for the health check.
 #[allow(clippy::type_complexity)]
 pub fn first_kick_rotation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
+    mut deferred: ResMut<DeferredKick>,
+    mut health: ResMut<Health>,
     mut grains: Query<
         (&mut AngularVelocity, &Torque, &MomentOfInertia),
         (With<Grain>, Without<Frozen>),
@@ -90,22 +123,34 @@ pub fn first_kick_rotation(
     if kick == 0.0 {
         return;
     }
+    let pending = deferred.rotation.take();
+    let mut finite = true;
     for (mut w, t, i) in grains.contiguous_iter_mut().expect("grain query is dense") {
         let w = w.bypass_change_detection();
         let update = |(w, (t, i)): (&mut AngularVelocity, (&Torque, &MomentOfInertia))| {
-            w.0 += t.0 * (kick / i.0);
+            kick_twice(&mut w.0, t.0, i.0, pending, kick);
         };
-        if w.len() >= PARALLEL_THRESHOLD {
+        // Only after a pending kick are the spins checked here (else the second kick did).
+        let kick_chunk =
+            |(w, (t, i)): (&mut [AngularVelocity], (&[Torque], &[MomentOfInertia]))| {
+                w.iter_mut().zip(t.iter().zip(i)).for_each(update);
+                pending.is_none() || finite_marker(&[], w) == 0.0
+            };
+        finite &= if w.len() >= PARALLEL_THRESHOLD {
             // Chunks, each a plain loop: rayon's per-item plumbing costs more than a kick.
             w.par_chunks_mut(PARALLEL_THRESHOLD)
                 .zip(
                     t.par_chunks(PARALLEL_THRESHOLD)
                         .zip(i.par_chunks(PARALLEL_THRESHOLD)),
                 )
-                .for_each(|(w, (t, i))| w.iter_mut().zip(t.iter().zip(i)).for_each(update));
+                .map(kick_chunk)
+                .reduce(|| true, |a, b| a & b)
         } else {
-            w.iter_mut().zip(t.iter().zip(i.iter())).for_each(update);
-        }
+            kick_chunk((w, (t, i)))
+        };
+    }
+    if pending.is_some() {
+        health.motion_finite &= finite;
     }
 }
 
@@ -238,11 +283,51 @@ pub fn second_kick_and_kinetic_energy(
     due: Res<KineticEnergyDue>,
     mut energy: ResMut<EnergySnapshot>,
     mut health: ResMut<Health>,
+    mut deferred: ResMut<DeferredKick>,
     mut grains: KineticQuery,
 ) {
     // Zero in the priming pass: nothing moves, the energies are still sampled.
     let kick = (1.0 - config.integrator.kick_before_drift()) * clock.pass_dt;
+    if deferred.allowed && !due.0 && kick != 0.0 {
+        // Left to the next step's first kick (or `apply_deferred_kick`); the health
+        // check reads what this step's first kick found.
+        deferred.translation = Some(kick);
+        deferred.rotation = config.rotation.then_some(kick);
+        return;
+    }
     kick_and_sum_kinetic(&config, kick, due.0, &mut energy, &mut health, &mut grains);
+}
+
+/// Applies the second kick the last step left pending ([`DeferredKick`]), so that the
+/// grains' velocities and spins are those of the step's end, bit for bit as if the step
+/// had kicked them itself; the kinetic energies are not summed (see
+/// [`sum_kinetic_energy`]). Does nothing when no kick is pending.
+pub fn apply_deferred_kick(world: &mut World) {
+    use bevy_ecs::system::RunSystemOnce;
+    let pending = world
+        .get_resource::<DeferredKick>()
+        .is_some_and(|d| d.translation.is_some() || d.rotation.is_some());
+    if pending {
+        world
+            .run_system_once(finish_deferred_kick)
+            .expect("the core resources are installed");
+    }
+}
+
+/// The system of [`apply_deferred_kick`]: the pending kick through the second kick's own
+/// pass (translation and rotation are left pending together, by the same amount).
+fn finish_deferred_kick(
+    config: Res<SimConfig>,
+    mut deferred: ResMut<DeferredKick>,
+    mut energy: ResMut<EnergySnapshot>,
+    mut health: ResMut<Health>,
+    mut grains: KineticQuery,
+) {
+    let translation = deferred.translation.take();
+    let rotation = deferred.rotation.take();
+    if let Some(kick) = translation.or(rotation) {
+        kick_and_sum_kinetic(&config, kick, false, &mut energy, &mut health, &mut grains);
+    }
 }
 
 /// Kicks every chunk of grains by `kick` (nothing when 0; spins only with rotation) and,
@@ -538,6 +623,7 @@ mod tests {
         world.insert_resource(KineticEnergyDue(due));
         world.insert_resource(EnergySnapshot::default());
         world.insert_resource(Health::default());
+        world.insert_resource(DeferredKick::default());
         let grains = (0..count)
             .map(|k| {
                 let s = (k + 1) as f64;

@@ -152,7 +152,8 @@ pub struct Health {
     /// Largest overlap / radius allowed before a run is stopped. Default: 0.5.
     pub max_overlap_ratio: f64,
     /// Whether every grain's velocity and spin was finite after the last kick (set by the
-    /// second kick, or by the kinetic-energy sums under Gear).
+    /// second kick, or by the kinetic-energy sums under Gear; after a deferred second kick,
+    /// by the next step's first kick, which then applies it: [`DeferredKick`]).
     pub motion_finite: bool,
 }
 
@@ -183,6 +184,36 @@ impl Default for KineticEnergyDue {
     fn default() -> Self {
         Self(true)
     }
+}
+
+/// A second velocity kick left by one step to the next step's first kick.
+///
+/// Velocity Verlet ends a step with a half kick, v += ½dt F/m, and opens the next with
+/// another by the same forces: two passes over every grain's velocity, spin, force,
+/// torque, mass and inertia with nothing between them that reads them, when the step's
+/// end state is not looked at. A step run by [`Simulation::step_before_another`]
+/// (`talus run` between its reports, [`Simulation::run_steps`] but for its last step)
+/// leaves its second kick pending here instead, and the next step's first kick applies it
+/// in the same pass as its own: the same operations in the same order on each grain, so
+/// the same bits, one pass over the grains fewer. [`Simulation::synchronize`] applies a
+/// pending kick without stepping. A simulation whose plan has a system that could read
+/// or change the grains between two steps (anything in the prepare, first- or
+/// second-integration, sample or export stages besides the core's integrator, wall motion
+/// and health check) never defers.
+///
+/// [`Simulation::step_before_another`]: crate::schedule::Simulation::step_before_another
+/// [`Simulation::run_steps`]: crate::schedule::Simulation::run_steps
+/// [`Simulation::synchronize`]: crate::schedule::Simulation::synchronize
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+pub struct DeferredKick {
+    /// Whether this step may leave its second kick pending (set by the simulation before
+    /// each step; only steps whose kinetic energies are not due leave it).
+    pub allowed: bool,
+    /// The pending kick of the translation, as the time it spans (the integrator's
+    /// second-kick fraction of the step that left it, times its dt).
+    pub translation: Option<f64>,
+    /// The pending kick of the rotation (spins are integrated), as `translation`.
+    pub rotation: Option<f64>,
 }
 
 /// Set by a protocol system (a packing generator reaching its target, say) when the run

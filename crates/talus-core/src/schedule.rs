@@ -109,6 +109,15 @@ pub struct SimBuilder {
     /// them ([`Self::gravity_in_force_sums`]); otherwise [`Self::build`] schedules the
     /// `gravity` pass.
     gravity_in_sums: bool,
+    /// Whether the core's own systems are all installed: a system added after them to a
+    /// stage that runs between two steps' force evaluations marks the plan as
+    /// `reads_between_steps`.
+    core_installed: bool,
+    /// Whether a system besides the core's integrator, wall motion and health check runs in
+    /// the prepare, integration, sample or export stages, where it could read or change the
+    /// grains' velocities between a step's second kick and the next step's first: a
+    /// [`DeferredKick`](crate::resources::DeferredKick) is then never left.
+    reads_between_steps: bool,
 }
 
 impl SimBuilder {
@@ -121,6 +130,7 @@ impl SimBuilder {
         world.insert_resource(StageTimings::default());
         world.insert_resource(Health::default());
         world.insert_resource(crate::resources::KineticEnergyDue::default());
+        world.insert_resource(crate::resources::DeferredKick::default());
         world.insert_resource(DissipationChannels::default());
         world.insert_resource(EnergyLedger::default());
         world.insert_resource(EnergySnapshot::default());
@@ -154,6 +164,8 @@ impl SimBuilder {
                 ..Plan::default()
             },
             gravity_in_sums: false,
+            core_installed: false,
+            reads_between_steps: false,
         };
         for stage in Stage::ALL {
             builder.add_hidden(stage, mark_stage(stage));
@@ -214,6 +226,7 @@ impl SimBuilder {
             );
         }
         builder.add_system(Stage::Sample, "health_check", integrate::health_check);
+        builder.core_installed = true;
         builder
     }
 
@@ -241,6 +254,18 @@ impl SimBuilder {
         system: impl IntoScheduleConfigs<ScheduleSystem, M>,
     ) -> &mut Self {
         self.add_hidden(stage, system);
+        if self.core_installed
+            && matches!(
+                stage,
+                Stage::Prepare
+                    | Stage::IntegratePositions
+                    | Stage::IntegrateVelocities
+                    | Stage::Sample
+                    | Stage::Export
+            )
+        {
+            self.reads_between_steps = true;
+        }
         let entry = self
             .plan
             .stages
@@ -320,6 +345,7 @@ impl SimBuilder {
             schedule: self.schedule,
             plan: self.plan,
             primed: false,
+            can_defer_kick: !self.reads_between_steps,
         }
     }
 }
@@ -347,7 +373,9 @@ impl StageTimings {
     }
 }
 
-/// A built simulation: call [`Simulation::step`] to advance it.
+/// A built simulation: call [`Simulation::step`] to advance it ([`Simulation::run_steps`]
+/// for several steps at once, [`Simulation::step_before_another`] in a driver's loop
+/// between the steps it looks at).
 pub struct Simulation {
     /// The world: grains, walls, contacts and resources.
     pub world: World,
@@ -355,6 +383,10 @@ pub struct Simulation {
     /// What runs in each stage.
     pub plan: Plan,
     primed: bool,
+    /// Whether nothing in the plan reads or changes the grains between two steps, so that
+    /// a step followed by another may leave its second kick to the next
+    /// ([`DeferredKick`](crate::resources::DeferredKick)).
+    can_defer_kick: bool,
 }
 
 impl Simulation {
@@ -377,9 +409,34 @@ impl Simulation {
         self.run_pass()
     }
 
-    /// Advances one time step.
+    /// Advances one time step; the grains' state is the step's end state.
     pub fn step(&mut self) -> Result<(), BlowUp> {
+        self.step_deferring(false)
+    }
+
+    /// Advances one time step that will be followed by another before anything reads or
+    /// changes the grains: the step's second kick may be left to the next step's first kick
+    /// ([`DeferredKick`](crate::resources::DeferredKick); the same bits, one pass over
+    /// the grains fewer). A step whose kinetic energies are due
+    /// ([`KineticEnergyDue`](crate::resources::KineticEnergyDue)) kicks as usual. Call
+    /// [`Self::synchronize`] before reading velocities after such a step without
+    /// stepping again. A non-finite velocity this step produced shows at the next step.
+    pub fn step_before_another(&mut self) -> Result<(), BlowUp> {
+        self.step_deferring(self.can_defer_kick)
+    }
+
+    /// Applies the second kick a step left to the next one, if any
+    /// ([`Self::step_before_another`]): the grains' velocities and spins become the last
+    /// step's end state.
+    pub fn synchronize(&mut self) {
+        integrate::apply_deferred_kick(&mut self.world);
+    }
+
+    fn step_deferring(&mut self, defer: bool) -> Result<(), BlowUp> {
         self.prime()?;
+        self.world
+            .resource_mut::<crate::resources::DeferredKick>()
+            .allowed = defer;
         let dt = self.world.resource::<SimConfig>().dt;
         {
             let mut clock = self.world.resource_mut::<Clock>();
@@ -391,12 +448,30 @@ impl Simulation {
         self.run_pass()
     }
 
-    /// Advances `n` steps, stopping at the first blow-up.
+    /// Advances `n` steps, stopping at the first blow-up. Nothing is read between the
+    /// steps: all but the last leave their second kick to the next
+    /// ([`Self::step_before_another`]) without summing the kinetic energies, and the last
+    /// runs as [`Self::step`] with [`KineticEnergyDue`](crate::resources::KineticEnergyDue)
+    /// as the caller left it. On a blow-up the pending kick is applied before returning.
     pub fn run_steps(&mut self, n: u64) -> Result<(), BlowUp> {
-        for _ in 0..n {
-            self.step()?;
+        use crate::resources::KineticEnergyDue;
+        let due = self.world.resource::<KineticEnergyDue>().0;
+        let mut result = Ok(());
+        for k in 0..n {
+            if k + 1 < n && self.can_defer_kick {
+                self.world.resource_mut::<KineticEnergyDue>().0 = false;
+                result = self.step_before_another();
+            } else {
+                self.world.resource_mut::<KineticEnergyDue>().0 = due;
+                result = self.step();
+            }
+            if result.is_err() {
+                break;
+            }
         }
-        Ok(())
+        self.world.resource_mut::<KineticEnergyDue>().0 = due;
+        self.synchronize();
+        result
     }
 
     fn run_pass(&mut self) -> Result<(), BlowUp> {

@@ -1,0 +1,196 @@
+//! A step followed by another may leave its second velocity kick to the next step's first
+//! kick (`DeferredKick`): free fall stays exact, the state after any run is the one
+//! step-by-step integration gives to the bit, nothing between two steps ever sees a
+//! half-kicked grain, and a non-finite velocity is still caught.
+
+mod common;
+
+use bevy_ecs::prelude::*;
+use glam::DVec3;
+use talus::core::prelude::*;
+use talus::core::resources::DeferredKick;
+use talus::core::schedule::{Simulation, Stage};
+
+/// One grain thrown up and sideways with a spin, no wall, no partner: nothing but gravity.
+const FREE_FALL: &str = r#"Scene(
+    name: "free-fall",
+    gravity: (0.0, 0.0, -9.81),
+    steps: 500,
+    time_step: 1e-3,
+    force_time_step: true,
+    plugins: ["linear_spring"],
+    materials: [(name: "glass", density: 2500.0,
+        contact: (law: "linear_spring", stiffness: 1e5, restitution: 0.5, friction: 0.5))],
+    grains: [List(material: "glass", grains: [
+        (position: (0.0, 0.0, 1.0), radius: 0.001, velocity: (0.3, -0.2, 2.5)),
+    ])],
+    output: (recording: false),
+)"#;
+
+fn pending(sim: &Simulation) -> bool {
+    let d = sim.world.resource::<DeferredKick>();
+    d.translation.is_some() || d.rotation.is_some()
+}
+
+/// Velocity Verlet integrates a constant acceleration exactly: x = x0 + v0 t + g t²/2 and
+/// v = v0 + g t after any number of steps, whether each step's second kick is applied at
+/// its end or folded into the next step's first kick.
+#[test]
+fn free_fall_is_exact_through_deferred_kicks() {
+    let (mut sim, steps) = common::build(FREE_FALL);
+    sim.prime().unwrap();
+    let start = common::grains(&mut sim)[0];
+    // A step followed by another, whose kinetic energies are not asked for, leaves its kick
+    // pending: the plan has nothing that reads the grains between steps.
+    let due = |sim: &mut Simulation, due: bool| {
+        sim.world
+            .resource_mut::<talus::core::resources::KineticEnergyDue>()
+            .0 = due;
+    };
+    due(&mut sim, false);
+    sim.step_before_another().unwrap();
+    assert!(pending(&sim), "the free fall's plan allows deferring");
+    due(&mut sim, true);
+    sim.run_steps(steps - 1).unwrap();
+    assert!(
+        !pending(&sim),
+        "run_steps ends with the last step's own kick"
+    );
+    let end = common::grains(&mut sim)[0];
+    let g = DVec3::new(0.0, 0.0, -9.81);
+    let t = steps as f64 * 1e-3;
+    let x = start.position + start.velocity * t + 0.5 * g * t * t;
+    let v = start.velocity + g * t;
+    assert!(
+        (end.position - x).length() < 1e-12 * x.length(),
+        "{} against {x}",
+        end.position
+    );
+    assert!(
+        (end.velocity - v).length() < 1e-12 * v.length(),
+        "{} against {v}",
+        end.velocity
+    );
+}
+
+/// Every grain's position, velocity and spin after a run of deferred steps, or after a
+/// deferred step and `synchronize`, are those of the same steps taken one by one with
+/// their own kicks, to the bit: frictional grains in a box, with walls, spins and
+/// contacts made and ended.
+#[test]
+fn deferred_kicks_leave_the_step_by_step_state_to_the_bit() {
+    let text = common::settling_box_scene("deferred", 15000);
+    let bits = |sim: &mut Simulation| {
+        common::grains(sim)
+            .iter()
+            .flat_map(|g| [g.position, g.velocity, g.omega])
+            .flat_map(|v| v.to_array().map(f64::to_bits))
+            .collect::<Vec<u64>>()
+    };
+    let (mut stepwise, steps) = common::build(&text);
+    for _ in 0..steps {
+        stepwise.step().unwrap();
+    }
+    let (mut batched, _) = common::build(&text);
+    batched.run_steps(steps).unwrap();
+    let (mut synchronized, _) = common::build(&text);
+    for _ in 0..steps {
+        synchronized.step_before_another().unwrap();
+    }
+    // The box's steps leave their kicks pending only when the kinetic energies are not
+    // due (the default is due every step): this one ran every kick itself.
+    assert!(!pending(&synchronized));
+    let (mut deferred, _) = common::build(&text);
+    deferred
+        .world
+        .resource_mut::<talus::core::resources::KineticEnergyDue>()
+        .0 = false;
+    for _ in 0..steps {
+        deferred.step_before_another().unwrap();
+    }
+    assert!(pending(&deferred));
+    deferred.synchronize();
+    assert!(!pending(&deferred));
+
+    let reference = bits(&mut stepwise);
+    let contacts = stepwise.world.resource::<EnergySnapshot>().contacts;
+    eprintln!("{contacts} contacts");
+    assert!(contacts > 50, "the grains must touch: {contacts} contacts");
+    assert!(
+        common::grains(&mut stepwise)
+            .iter()
+            .any(|g| g.omega.length() > 1e-3),
+        "the grains must spin"
+    );
+    assert_eq!(bits(&mut batched), reference, "run_steps");
+    assert_eq!(
+        bits(&mut synchronized),
+        reference,
+        "steps with kinetic energies due"
+    );
+    assert_eq!(
+        bits(&mut deferred),
+        reference,
+        "deferred steps, then synchronize"
+    );
+}
+
+/// A system that runs between two steps (here one in the sample stage that reads the
+/// velocities, as a sampler or exporter does) keeps every step's second kick in its step:
+/// it sees each step's end state, the same as with plain steps.
+#[test]
+fn a_plan_that_reads_between_steps_never_defers() {
+    #[derive(Resource, Default)]
+    struct Seen(Vec<u64>);
+    let observer = |grains: Query<&Velocity, With<Grain>>, mut seen: ResMut<Seen>| {
+        let total: DVec3 = grains.iter().map(|v| v.0).sum();
+        seen.0.push(total.z.to_bits());
+    };
+    let build = || {
+        let text = common::settling_box_scene("observed", 60);
+        let scene = talus::scene::parse("observed.ron", &text).unwrap();
+        let mut builder = scene.build(&talus::registry()).unwrap().builder;
+        builder.world.insert_resource(Seen::default());
+        builder.add_system(Stage::Sample, "observer", observer);
+        builder.build()
+    };
+    let mut plain = build();
+    let mut asked = build();
+    asked
+        .world
+        .resource_mut::<talus::core::resources::KineticEnergyDue>()
+        .0 = false;
+    for _ in 0..60 {
+        plain.step().unwrap();
+        asked.step_before_another().unwrap();
+        assert!(!pending(&asked));
+    }
+    assert_eq!(
+        plain.world.resource::<Seen>().0,
+        asked.world.resource::<Seen>().0
+    );
+}
+
+/// A velocity made non-finite while a kick is pending (here by a force set to NaN between
+/// two steps) stops the next step with the health check's message, as it does without
+/// deferring.
+#[test]
+fn a_non_finite_velocity_is_caught_through_a_pending_kick() {
+    for defer in [false, true] {
+        let (mut sim, _) = common::build(FREE_FALL);
+        sim.world
+            .resource_mut::<talus::core::resources::KineticEnergyDue>()
+            .0 = !defer;
+        sim.step_before_another().unwrap();
+        sim.step_before_another().unwrap();
+        assert_eq!(pending(&sim), defer);
+        let mut forces = sim.world.query::<&mut Force>();
+        for mut f in forces.iter_mut(&mut sim.world) {
+            f.0.x = f64::NAN;
+        }
+        let blow_up = sim.step().expect_err("a NaN velocity must stop the run");
+        assert_eq!(blow_up.step, 3, "deferring: {defer}");
+        assert!(blow_up.reason.contains("NaN"), "{}", blow_up.reason);
+        assert_eq!(blow_up.entities.len(), 1);
+    }
+}
