@@ -25,6 +25,10 @@ fn run_chute(ledger: bool) -> (ReportSample, ReportSample) {
     let steps = built.stop.steps;
     assert_eq!(steps, 100);
     let mut sim = built.builder.build();
+    if !ledger {
+        // The energies below then come through steps whose motion the snapshot holds.
+        assert!(sim.may_hold_motion(), "the chute's plan reads no motion");
+    }
     sim.prime().unwrap();
     let start = ReportSample::take(&sim.world);
     sim.run_steps(steps).unwrap();

@@ -1,7 +1,8 @@
 //! A step followed by another may leave its second velocity kick to the next step's first
-//! kick (`DeferredKick`): free fall stays exact, the state after any run is the one
-//! step-by-step integration gives to the bit, nothing between two steps ever sees a
-//! half-kicked grain, and a non-finite velocity is still caught.
+//! kick (`DeferredKick`), and the grains' motion in the snapshot: free fall stays exact, the
+//! state after any run is the one step-by-step integration gives to the bit, nothing
+//! between two steps ever sees a half-kicked grain, no system that reads the grains'
+//! motion ever finds it stale, and a non-finite velocity is still caught.
 
 mod common;
 
@@ -105,12 +106,26 @@ fn deferred_kicks_leave_the_step_by_step_state_to_the_bit() {
         .world
         .resource_mut::<talus::core::resources::KineticEnergyDue>()
         .0 = false;
+    assert!(deferred.may_hold_motion(), "the box's plan reads no motion");
     for _ in 0..steps {
         deferred.step_before_another().unwrap();
     }
     assert!(pending(&deferred));
+    assert!(
+        deferred
+            .world
+            .resource::<DeferredKick>()
+            .snapshot_holds_motion,
+        "the snapshot holds the motion between unobserved steps"
+    );
     deferred.synchronize();
     assert!(!pending(&deferred));
+    assert!(
+        !deferred
+            .world
+            .resource::<DeferredKick>()
+            .snapshot_holds_motion
+    );
 
     let reference = bits(&mut stepwise);
     let contacts = stepwise.world.resource::<EnergySnapshot>().contacts;
@@ -171,6 +186,69 @@ fn a_plan_that_reads_between_steps_never_defers() {
     );
 }
 
+/// A system in a stage inside the step that reads the grains' velocities (here a drag
+/// force, F = −c v, in the body-force stage) finds them current: the plan never leaves the
+/// motion in the snapshot, and the drag acts on the velocities of each step, so deferred
+/// steps give the step-by-step state to the bit. A system that takes the whole world
+/// without declaring itself motion-free also keeps the motion in the components.
+#[test]
+fn a_system_that_reads_the_motion_inside_the_step_always_finds_it_current() {
+    let drag = |mut grains: Query<(&Velocity, &mut Force), With<Grain>>| {
+        for (v, mut f) in &mut grains {
+            f.0 -= 2e-4 * v.0;
+        }
+    };
+    let build = |drag_on: bool, exclusive: bool| {
+        let text = common::settling_box_scene("dragged", 3000);
+        let scene = talus::scene::parse("dragged.ron", &text).unwrap();
+        let mut builder = scene.build(&talus::registry()).unwrap().builder;
+        if drag_on {
+            builder.add_system(Stage::BodyForces, "drag", drag);
+        }
+        if exclusive {
+            builder.add_system(Stage::NarrowPhase, "whole world", |_: &mut World| {});
+        }
+        builder.build()
+    };
+    assert!(build(false, false).may_hold_motion());
+    assert!(
+        !build(false, true).may_hold_motion(),
+        "an undeclared exclusive system"
+    );
+    let bits = |sim: &mut Simulation| {
+        common::grains(sim)
+            .iter()
+            .flat_map(|g| [g.position, g.velocity, g.omega])
+            .flat_map(|v| v.to_array().map(f64::to_bits))
+            .collect::<Vec<u64>>()
+    };
+    let mut stepwise = build(true, false);
+    let mut deferred = build(true, false);
+    assert!(!deferred.may_hold_motion(), "the drag reads the velocities");
+    deferred
+        .world
+        .resource_mut::<talus::core::resources::KineticEnergyDue>()
+        .0 = false;
+    for _ in 0..3000 {
+        stepwise.step().unwrap();
+        deferred.step_before_another().unwrap();
+        assert!(
+            !deferred
+                .world
+                .resource::<DeferredKick>()
+                .snapshot_holds_motion
+        );
+    }
+    assert!(pending(&deferred), "the kick is still deferred");
+    deferred.synchronize();
+    // The drag matters: without it the grains end elsewhere.
+    let mut undragged = build(false, false);
+    undragged.run_steps(3000).unwrap();
+    let reference = bits(&mut stepwise);
+    assert_ne!(bits(&mut undragged), reference);
+    assert_eq!(bits(&mut deferred), reference);
+}
+
 /// A velocity made non-finite while a kick is pending (here by a force set to NaN between
 /// two steps) stops the next step with the health check's message, as it does without
 /// deferring.
@@ -193,4 +271,36 @@ fn a_non_finite_velocity_is_caught_through_a_pending_kick() {
         assert!(blow_up.reason.contains("NaN"), "{}", blow_up.reason);
         assert_eq!(blow_up.entities.len(), 1);
     }
+}
+
+/// The same when the next step also defers: its first kick works on the motion the
+/// snapshot holds, and the health check finds the grain there.
+#[test]
+fn a_non_finite_velocity_is_caught_in_the_motion_the_snapshot_holds() {
+    let (mut sim, _) = common::build(FREE_FALL);
+    sim.world
+        .resource_mut::<talus::core::resources::KineticEnergyDue>()
+        .0 = false;
+    sim.step_before_another().unwrap();
+    sim.step_before_another().unwrap();
+    assert!(sim.world.resource::<DeferredKick>().snapshot_holds_motion);
+    let grain = sim
+        .world
+        .query_filtered::<Entity, With<Grain>>()
+        .single(&sim.world)
+        .unwrap();
+    let mut forces = sim.world.query::<&mut Force>();
+    for mut f in forces.iter_mut(&mut sim.world) {
+        f.0.y = f64::INFINITY;
+    }
+    let blow_up = sim
+        .step_before_another()
+        .expect_err("an infinite velocity must stop the run");
+    assert_eq!(blow_up.step, 3);
+    assert!(
+        blow_up.reason.contains("NaN or infinite"),
+        "{}",
+        blow_up.reason
+    );
+    assert_eq!(blow_up.entities, vec![grain]);
 }

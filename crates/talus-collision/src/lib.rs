@@ -45,5 +45,8 @@ impl Plugin for CollisionPlugin {
             "update_contact_entities",
             narrow::update_contacts,
         );
+        // It takes the world to spawn and despawn contacts; it reads the grains only
+        // through the snapshot.
+        sim.declare_motion_free(&narrow::update_contacts);
     }
 }

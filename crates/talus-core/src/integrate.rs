@@ -13,6 +13,7 @@ use crate::components::*;
 use crate::energy::{EnergyLedger, EnergySnapshot};
 use crate::lanes::{F4, V4};
 use crate::resources::{BlowUp, Clock, DeferredKick, Health, KineticEnergyDue, SimConfig};
+use crate::snapshot::{GrainRecord, GrainSnapshot};
 
 /// Grains below this count are integrated on one thread: spawning tasks costs more.
 const PARALLEL_THRESHOLD: usize = 4096;
@@ -25,17 +26,19 @@ const REDUCTION_CHUNK: usize = 1024;
 /// last step left pending ([`DeferredKick`]) is applied first, grain by grain in the same
 /// pass, and the velocities it leaves are checked finite for the health check (through
 /// the gravity work, which any non-finite velocity makes non-finite).
-#[allow(clippy::type_complexity)]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn kick_drift_translation(
     config: Res<SimConfig>,
     clock: Res<Clock>,
     mut ledger: ResMut<EnergyLedger>,
     mut deferred: ResMut<DeferredKick>,
     mut health: ResMut<Health>,
+    mut snapshot: ResMut<GrainSnapshot>,
     mut grains: Query<
         (&mut Position, &mut Velocity, &Force, &Mass),
         (With<Grain>, Without<Frozen>),
     >,
+    moving: Query<(Entity, &Force, &Mass), (With<Grain>, Without<Frozen>)>,
 ) {
     let dt = clock.pass_dt;
     if dt == 0.0 {
@@ -44,6 +47,26 @@ pub fn kick_drift_translation(
     let kick = config.integrator.kick_before_drift() * dt;
     let g = config.gravity;
     let pending = deferred.translation.take();
+    if deferred.snapshot_holds_motion {
+        // The last step's state is the snapshot's: kick and drift its records in place
+        // (a grain's velocity and position in one line), the components untouched.
+        let update = |r: &mut GrainRecord, f: &Force, m: &Mass| {
+            kick_twice(&mut r.velocity, f.0, m.0, pending, kick);
+            let dx = r.velocity * dt;
+            r.position += dx;
+            m.0 * g.dot(dx)
+        };
+        let gravity_work = snapshot.kick_drift_held(
+            moving.contiguous_iter().expect("grain query is dense"),
+            (REDUCTION_CHUNK, PARALLEL_THRESHOLD),
+            update,
+        );
+        ledger.gravity_work += gravity_work;
+        if pending.is_some() {
+            health.motion_finite = gravity_work.is_finite();
+        }
+        return;
+    }
     let mut gravity_work = 0.0;
     for (mut p, mut v, f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
         let p = p.bypass_change_detection();
@@ -85,6 +108,24 @@ pub fn kick_drift_translation(
     }
 }
 
+/// The part of a snapshot array that holds the grains of one table, `entities` (the
+/// snapshot copies whole tables in order, so a table's grains are consecutive there).
+#[inline]
+fn held_range<'a, T>(
+    dense_of: &[u32],
+    snapshot_entities: &[Entity],
+    entities: &[Entity],
+    column: &'a mut [T],
+) -> &'a mut [T] {
+    let Some(first) = entities.first() else {
+        return &mut [];
+    };
+    let start = dense_of[first.index_u32() as usize] as usize;
+    let range = start..start + entities.len();
+    debug_assert_eq!(&snapshot_entities[range.clone()], entities);
+    &mut column[range]
+}
+
 /// Adds to `v` the pending second kick's `F/m` times `pending` (if any), then the first
 /// kick's times `kick`: the operations of the two separate passes, in their order. Under
 /// velocity Verlet the two kicks span the same half step, and their common increment is
@@ -114,8 +155,9 @@ pub fn first_kick_rotation(
     clock: Res<Clock>,
     mut deferred: ResMut<DeferredKick>,
     mut health: ResMut<Health>,
+    mut snapshot: ResMut<GrainSnapshot>,
     mut grains: Query<
-        (&mut AngularVelocity, &Torque, &MomentOfInertia),
+        (Entity, &mut AngularVelocity, &Torque, &MomentOfInertia),
         (With<Grain>, Without<Frozen>),
     >,
 ) {
@@ -124,33 +166,63 @@ pub fn first_kick_rotation(
         return;
     }
     let pending = deferred.rotation.take();
+    let held = deferred.snapshot_holds_motion;
+    let s = &mut *snapshot;
     let mut finite = true;
-    for (mut w, t, i) in grains.contiguous_iter_mut().expect("grain query is dense") {
-        let w = w.bypass_change_detection();
-        let update = |(w, (t, i)): (&mut AngularVelocity, (&Torque, &MomentOfInertia))| {
-            kick_twice(&mut w.0, t.0, i.0, pending, kick);
-        };
-        // Only after a pending kick are the spins checked here (else the second kick did).
-        let kick_chunk =
-            |(w, (t, i)): (&mut [AngularVelocity], (&[Torque], &[MomentOfInertia]))| {
-                w.iter_mut().zip(t.iter().zip(i)).for_each(update);
-                pending.is_none() || finite_marker(&[], w) == 0.0
-            };
-        finite &= if w.len() >= PARALLEL_THRESHOLD {
-            // Chunks, each a plain loop: rayon's per-item plumbing costs more than a kick.
-            w.par_chunks_mut(PARALLEL_THRESHOLD)
-                .zip(
-                    t.par_chunks(PARALLEL_THRESHOLD)
-                        .zip(i.par_chunks(PARALLEL_THRESHOLD)),
-                )
-                .map(kick_chunk)
-                .reduce(|| true, |a, b| a & b)
+    for (e, mut w, t, i) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        // The spins of the last step are the snapshot's when it holds the motion.
+        finite &= if held {
+            let w = held_range(&s.dense_of, &s.entity, e, &mut s.omega);
+            kick_spins(w, |w| w, t, i, pending, kick)
         } else {
-            kick_chunk((w, (t, i)))
+            kick_spins(
+                w.bypass_change_detection(),
+                |w| &mut w.0,
+                t,
+                i,
+                pending,
+                kick,
+            )
         };
     }
     if pending.is_some() {
         health.motion_finite &= finite;
+    }
+}
+
+/// The first rotational kick of one table's spins (`spin` reaches the vector of an
+/// element of `w`); when a kick was pending, whether every spin it left is finite (else
+/// true: the second kick checked them).
+fn kick_spins<W: Send>(
+    w: &mut [W],
+    spin: fn(&mut W) -> &mut DVec3,
+    t: &[Torque],
+    i: &[MomentOfInertia],
+    pending: Option<f64>,
+    kick: f64,
+) -> bool {
+    let kick_chunk = |(w, (t, i)): (&mut [W], (&[Torque], &[MomentOfInertia]))| {
+        for (w, (t, i)) in w.iter_mut().zip(t.iter().zip(i)) {
+            kick_twice(spin(w), t.0, i.0, pending, kick);
+        }
+        // Without a branch or a chain of floating-point additions (see `finite_marker`).
+        pending.is_none()
+            || w.iter_mut().fold(true, |all, w| {
+                let x = *spin(w);
+                all & x.x.is_finite() & x.y.is_finite() & x.z.is_finite()
+            })
+    };
+    if w.len() >= PARALLEL_THRESHOLD {
+        // Chunks, each a plain loop: rayon's per-item plumbing costs more than a kick.
+        w.par_chunks_mut(PARALLEL_THRESHOLD)
+            .zip(
+                t.par_chunks(PARALLEL_THRESHOLD)
+                    .zip(i.par_chunks(PARALLEL_THRESHOLD)),
+            )
+            .map(kick_chunk)
+            .reduce(|| true, |a, b| a & b)
+    } else {
+        kick_chunk((w, (t, i)))
     }
 }
 
@@ -293,8 +365,16 @@ pub fn second_kick_and_kinetic_energy(
         // check reads what this step's first kick found.
         deferred.translation = Some(kick);
         deferred.rotation = config.rotation.then_some(kick);
+        // The snapshot's records and spins are this step's positions, velocities and
+        // spins (the components too, unless this step's kicks worked on the snapshot):
+        // the next step may kick and drift them in place.
+        deferred.snapshot_holds_motion = deferred.may_hold_motion;
         return;
     }
+    debug_assert!(
+        !deferred.snapshot_holds_motion,
+        "a step that kicks to its end works on the components"
+    );
     kick_and_sum_kinetic(&config, kick, due.0, &mut energy, &mut health, &mut grains);
 }
 
@@ -327,6 +407,61 @@ fn finish_deferred_kick(
     let rotation = deferred.rotation.take();
     if let Some(kick) = translation.or(rotation) {
         kick_and_sum_kinetic(&config, kick, false, &mut energy, &mut health, &mut grains);
+    }
+}
+
+/// Writes the positions, velocities and spins that the snapshot holds in place of the
+/// grains' components ([`DeferredKick::snapshot_holds_motion`]) back into the components,
+/// which then hold the last step's state again. Does nothing when the snapshot holds none.
+pub fn write_back_held_motion(world: &mut World) {
+    use bevy_ecs::system::RunSystemOnce;
+    let held = world
+        .get_resource::<DeferredKick>()
+        .is_some_and(|d| d.snapshot_holds_motion);
+    if held {
+        world
+            .run_system_once(copy_held_motion)
+            .expect("the core resources are installed");
+    }
+}
+
+/// The system of [`write_back_held_motion`], table by table, in parallel chunks.
+#[allow(clippy::type_complexity)]
+fn copy_held_motion(
+    mut deferred: ResMut<DeferredKick>,
+    snapshot: Res<GrainSnapshot>,
+    mut grains: Query<(Entity, &mut Position, &mut Velocity, &mut AngularVelocity), With<Grain>>,
+) {
+    deferred.snapshot_holds_motion = false;
+    for (e, mut p, mut v, mut w) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        let Some(first) = e.first() else { continue };
+        let start = snapshot.dense_of[first.index_u32() as usize] as usize;
+        let range = start..start + e.len();
+        debug_assert_eq!(&snapshot.entity[range.clone()], e);
+        let (p, v, w) = (
+            p.bypass_change_detection(),
+            v.bypass_change_detection(),
+            w.bypass_change_detection(),
+        );
+        p.par_chunks_mut(REDUCTION_CHUNK)
+            .zip(v.par_chunks_mut(REDUCTION_CHUNK))
+            .zip(w.par_chunks_mut(REDUCTION_CHUNK))
+            .zip(
+                snapshot.records[range.clone()]
+                    .par_chunks(REDUCTION_CHUNK)
+                    .zip(snapshot.omega[range].par_chunks(REDUCTION_CHUNK)),
+            )
+            .for_each(|(((p, v), w), (records, omega))| {
+                for ((p, v), (w, (r, o))) in p
+                    .iter_mut()
+                    .zip(v)
+                    .zip(w.iter_mut().zip(records.iter().zip(omega)))
+                {
+                    p.0 = r.position;
+                    v.0 = r.velocity;
+                    w.0 = *o;
+                }
+            });
     }
 }
 
@@ -561,9 +696,37 @@ pub fn health_check(
     clock: Res<Clock>,
     energy: Res<EnergySnapshot>,
     mut health: ResMut<Health>,
+    deferred: Option<Res<DeferredKick>>,
+    snapshot: Option<Res<GrainSnapshot>>,
     grains: Query<(Entity, &Position, &Velocity, &AngularVelocity, &Force), With<Grain>>,
 ) {
     if health.blow_up.is_some() {
+        return;
+    }
+    let held = deferred.is_some_and(|d| d.snapshot_holds_motion);
+    if let (false, true, Some(snapshot)) = (health.motion_finite, held, snapshot) {
+        // The last step's motion is the snapshot's; the forces are the components'.
+        let finite = |x: DVec3| x.is_finite();
+        let mut bad: Vec<Entity> = (0..snapshot.len())
+            .filter(|&k| {
+                let r = &snapshot.records[k];
+                !(finite(r.position) && finite(r.velocity) && finite(snapshot.omega[k]))
+            })
+            .map(|k| snapshot.entity[k])
+            .take(16)
+            .collect();
+        let forces: Vec<Entity> = grains
+            .iter()
+            .filter(|(e, .., f)| !f.0.is_finite() && !bad.contains(e))
+            .map(|(e, ..)| e)
+            .take(16 - bad.len())
+            .collect();
+        bad.extend(forces);
+        health.blow_up = Some(BlowUp {
+            step: clock.step,
+            reason: "a position, velocity, spin or force became NaN or infinite".into(),
+            entities: bad,
+        });
         return;
     }
     if !health.motion_finite {

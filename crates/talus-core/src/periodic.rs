@@ -255,24 +255,50 @@ impl PeriodicBox {
     /// is inside and this changes nothing.)
     #[inline]
     pub fn wrapper(&self) -> impl Fn(&mut DVec3) + Sync + '_ {
+        let rule = self.wrap_rule();
+        move |p: &mut DVec3| rule.apply(p)
+    }
+
+    /// The unsheared wrap with the box's bounds prepared ([`Self::wrapper`]), as a value
+    /// whose test inlines into a loop over the grains.
+    #[inline]
+    pub fn wrap_rule(&self) -> WrapRule<'_> {
         // An axis that does not wrap has infinite bounds, so that almost every grain,
         // inside the box after a step, passes one test of all axes at once; the others
         // take the full rule.
         let bound = |a: usize, value: f64, open: f64| if self.axes[a] { value } else { open };
-        let lo = DVec3::from_array(std::array::from_fn(|a| {
-            bound(a, self.lo[a], f64::NEG_INFINITY)
-        }));
-        let hi = DVec3::from_array(std::array::from_fn(|a| bound(a, self.hi[a], f64::INFINITY)));
-        move |p: &mut DVec3| {
-            let inside = (p.x >= lo.x)
-                & (p.x < hi.x)
-                & (p.y >= lo.y)
-                & (p.y < hi.y)
-                & (p.z >= lo.z)
-                & (p.z < hi.z);
-            if !inside {
-                *p = self.wrap(*p);
-            }
+        WrapRule {
+            lo: DVec3::from_array(std::array::from_fn(|a| {
+                bound(a, self.lo[a], f64::NEG_INFINITY)
+            })),
+            hi: DVec3::from_array(std::array::from_fn(|a| bound(a, self.hi[a], f64::INFINITY))),
+            box_: self,
+        }
+    }
+}
+
+/// The unsheared wrap of a [`PeriodicBox`] ([`PeriodicBox::wrap_rule`]).
+#[derive(Clone, Copy, Debug)]
+pub struct WrapRule<'a> {
+    lo: DVec3,
+    hi: DVec3,
+    box_: &'a PeriodicBox,
+}
+
+impl WrapRule<'_> {
+    /// Wraps one position into the box: one test of all axes for a grain inside it (almost
+    /// every grain after a step), the box's full rule for the others.
+    #[inline(always)]
+    pub fn apply(&self, p: &mut DVec3) {
+        let (lo, hi) = (self.lo, self.hi);
+        let inside = (p.x >= lo.x)
+            & (p.x < hi.x)
+            & (p.y >= lo.y)
+            & (p.y < hi.y)
+            & (p.z >= lo.z)
+            & (p.z < hi.z);
+        if !inside {
+            *p = self.box_.wrap(*p);
         }
     }
 }

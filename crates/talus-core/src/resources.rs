@@ -214,6 +214,21 @@ pub struct DeferredKick {
     pub translation: Option<f64>,
     /// The pending kick of the rotation (spins are integrated), as `translation`.
     pub rotation: Option<f64>,
+    /// Whether the grains' positions, velocities and spins of the last step are held in
+    /// the [`GrainSnapshot`](crate::snapshot::GrainSnapshot) only: set by a step that left
+    /// its kick pending, so that the next step's kicks and drift work on the snapshot's
+    /// records in place and its copy from the grains' components is skipped. The
+    /// components are written back by [`Simulation::synchronize`] and before any step that
+    /// does not defer its kick.
+    ///
+    /// [`Simulation::synchronize`]: crate::schedule::Simulation::synchronize
+    pub snapshot_holds_motion: bool,
+    /// Whether a step that leaves its kick pending may leave the motion in the snapshot
+    /// ([`Self::snapshot_holds_motion`]): set when the simulation is built, true when no
+    /// system of its plan but the core's own and those declared motion-free could read the
+    /// grains' positions, velocities or spins
+    /// ([`SimBuilder::declare_motion_free`](crate::schedule::SimBuilder::declare_motion_free)).
+    pub may_hold_motion: bool,
 }
 
 /// Set by a protocol system (a packing generator reaching its target, say) when the run

@@ -118,6 +118,11 @@ pub struct SimBuilder {
     /// grains' velocities between a step's second kick and the next step's first: a
     /// [`DeferredKick`](crate::resources::DeferredKick) is then never left.
     reads_between_steps: bool,
+    /// The system types declared not to read or change the grains' positions, velocities
+    /// or spins beyond the core's own use ([`Self::declare_motion_free`]): the core's
+    /// integrator, snapshot and health check, and systems that declare no such access but
+    /// take the whole world.
+    motion_free: Vec<std::any::TypeId>,
 }
 
 impl SimBuilder {
@@ -166,7 +171,15 @@ impl SimBuilder {
             gravity_in_sums: false,
             core_installed: false,
             reads_between_steps: false,
+            motion_free: Vec::new(),
         };
+        // The core's own systems that read or change the grains' motion know where it is
+        // (`DeferredKick::snapshot_holds_motion`).
+        builder.declare_motion_free(&integrate::kick_drift_translation);
+        builder.declare_motion_free(&integrate::first_kick_rotation);
+        builder.declare_motion_free(&snapshot::gather_snapshot);
+        builder.declare_motion_free(&integrate::second_kick_and_kinetic_energy);
+        builder.declare_motion_free(&integrate::health_check);
         for stage in Stage::ALL {
             builder.add_hidden(stage, mark_stage(stage));
         }
@@ -334,18 +347,72 @@ impl SimBuilder {
         }
     }
 
+    /// Declares that a system added with [`Self::add_system`] reads and changes none of the
+    /// grains' positions, velocities and spins (`Position`, `Velocity`, `AngularVelocity`),
+    /// whatever access it declares: for a system that takes the whole world (`&mut World`)
+    /// to spawn or despawn entities but reads the grains only through the
+    /// [`GrainSnapshot`]. Between two steps that nothing observes, the snapshot may hold
+    /// the grains' motion in place of those components
+    /// ([`DeferredKick::snapshot_holds_motion`](crate::resources::DeferredKick::snapshot_holds_motion));
+    /// a system that takes the whole world without this declaration, or that declares an
+    /// access to one of them, keeps the components current at every step.
+    pub fn declare_motion_free<F: IntoSystem<(), (), M>, M>(&mut self, _system: &F) {
+        self.motion_free.push(std::any::TypeId::of::<F::System>());
+    }
+
+    /// Whether a system of the step, other than those of [`Self::declare_motion_free`],
+    /// takes the whole world or declares an access to the grains' positions, velocities or
+    /// spins. Builds the schedule to read the systems' accesses; true if it cannot.
+    fn others_touch_motion(&mut self) -> bool {
+        use crate::components::{AngularVelocity, Position, Velocity};
+        use bevy_ecs::schedule::ApplyDeferred;
+        use bevy_ecs::system::SystemAccess;
+        let motion = [
+            self.world.register_component::<Position>(),
+            self.world.register_component::<Velocity>(),
+            self.world.register_component::<AngularVelocity>(),
+        ];
+        if self.schedule.initialize(&mut self.world).is_err() {
+            return true;
+        }
+        let Ok(mut systems) = self.schedule.systems_with_access() else {
+            return true;
+        };
+        systems.any(|(_, s)| {
+            let kind = s.system().system_type();
+            if self.motion_free.contains(&kind) || kind == std::any::TypeId::of::<ApplyDeferred>() {
+                return false;
+            }
+            match s.access() {
+                SystemAccess::None => false,
+                SystemAccess::Exclusive => true,
+                SystemAccess::Shared(access) => {
+                    let access = access.combined_access();
+                    motion.iter().any(|&c| access.has_read(c))
+                }
+            }
+        })
+    }
+
     /// Finishes the simulation. Initial forces are evaluated on the first step call.
     pub fn build(mut self) -> Simulation {
         if self.config().gravity != glam::DVec3::ZERO && !self.gravity_in_sums {
             self.add_system(Stage::BodyForces, "gravity", integrate::gravity);
         }
         self.world.remove_resource::<SlotCounts>();
+        let can_defer_kick = !self.reads_between_steps;
+        // The snapshot may hold the motion between unobserved steps only where no other
+        // system could look for it in the components.
+        let can_hold_motion = can_defer_kick && !self.others_touch_motion();
+        self.world
+            .resource_mut::<crate::resources::DeferredKick>()
+            .may_hold_motion = can_hold_motion;
         Simulation {
             world: self.world,
             schedule: self.schedule,
             plan: self.plan,
             primed: false,
-            can_defer_kick: !self.reads_between_steps,
+            can_defer_kick,
         }
     }
 }
@@ -429,11 +496,21 @@ impl Simulation {
     /// ([`Self::step_before_another`]): the grains' velocities and spins become the last
     /// step's end state.
     pub fn synchronize(&mut self) {
+        integrate::write_back_held_motion(&mut self.world);
         integrate::apply_deferred_kick(&mut self.world);
     }
 
     fn step_deferring(&mut self, defer: bool) -> Result<(), BlowUp> {
         self.prime()?;
+        // A step that will kick its grains to its end state works on their components:
+        // the snapshot gives back the motion it holds first.
+        let due = self
+            .world
+            .resource::<crate::resources::KineticEnergyDue>()
+            .0;
+        if !defer || due {
+            integrate::write_back_held_motion(&mut self.world);
+        }
         self.world
             .resource_mut::<crate::resources::DeferredKick>()
             .allowed = defer;
@@ -488,6 +565,18 @@ impl Simulation {
             Some(b) => Err(b),
             None => Ok(()),
         }
+    }
+
+    /// Whether, between two steps that nothing observes ([`Self::step_before_another`]),
+    /// the grains' positions, velocities and spins may be held in the [`GrainSnapshot`] in
+    /// place of their components
+    /// ([`DeferredKick::snapshot_holds_motion`](crate::resources::DeferredKick::snapshot_holds_motion)):
+    /// true when no system of the plan besides those declared motion-free
+    /// ([`SimBuilder::declare_motion_free`]) could read them there.
+    pub fn may_hold_motion(&self) -> bool {
+        self.world
+            .resource::<crate::resources::DeferredKick>()
+            .may_hold_motion
     }
 
     /// Steps completed.

@@ -3,7 +3,10 @@
 //! Grain entities stay the source of truth; at the start of the broad phase their
 //! state is copied, in table order, into flat arrays. Collision detection and contact
 //! laws index those arrays, never the world, so the force loop needs neither hashing nor
-//! entity look-ups. (A subdomain's ghost grains would be appended here.)
+//! entity look-ups. Between two steps that nothing observes the arrays hold the grains'
+//! motion in place of their components, written back before anything looks
+//! ([`crate::resources::DeferredKick::snapshot_holds_motion`]). (A subdomain's ghost
+//! grains would be appended here.)
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
@@ -362,12 +365,25 @@ impl Moves {
         }
     }
 
-    /// Adds one grain's displacement.
+    /// Adds one grain's displacement. A NaN displacement is left out, as `f64::max` and
+    /// `f64::min` would leave it (the health check stops such a run), but the comparisons
+    /// are single instructions: each of the seven running extremes is a chain through
+    /// every grain of a block, and NaN-aware minima and maxima lengthen its every link.
     #[inline(always)]
     fn add(&mut self, d: DVec3) {
-        self.largest_sq = self.largest_sq.max(d.length_squared());
-        self.low = self.low.min(d);
-        self.high = self.high.max(d);
+        let larger = |a: f64, b: f64| if b > a { b } else { a };
+        let smaller = |a: f64, b: f64| if b < a { b } else { a };
+        self.largest_sq = larger(self.largest_sq, d.length_squared());
+        self.low = DVec3::new(
+            smaller(self.low.x, d.x),
+            smaller(self.low.y, d.y),
+            smaller(self.low.z, d.z),
+        );
+        self.high = DVec3::new(
+            larger(self.high.x, d.x),
+            larger(self.high.y, d.y),
+            larger(self.high.z, d.z),
+        );
     }
 
     /// Both sets of displacements.
@@ -512,6 +528,55 @@ fn copy_column<T: Sync, U: Send>(dst: &mut [U], src: &[T], value: impl Fn(&T) ->
 /// heap).
 type ChunkMoves = (f64, SmallVec<[(usize, Moves); 20]>);
 
+/// A chunk of one table's grains whose moves since the reference are to be taken: the
+/// grains `from..from + positions.len()` of the table that starts at dense index
+/// `table_start`, `reference` the table's part of the reference positions.
+struct MovedChunk<'a, T> {
+    table_start: usize,
+    from: usize,
+    positions: &'a [T],
+    reference: &'a [DVec3],
+}
+
+impl<T> MovedChunk<'_, T> {
+    /// The moves of each block of grains (by dense index) this chunk holds a part of (a
+    /// table need not start at a block's start), `position` reading an element's position.
+    #[inline(always)]
+    fn block_moves(
+        &self,
+        position: impl Fn(&T) -> DVec3,
+        periodic_box: &Option<crate::periodic::PeriodicBox>,
+        image: &crate::periodic::NearestImage,
+    ) -> SmallVec<[(usize, Moves); 20]> {
+        let (chunk_start, to) = (self.from, self.from + self.positions.len());
+        let mut blocks = SmallVec::new();
+        let mut from = chunk_start;
+        while from < to {
+            let block = (self.table_start + from) / MOVE_BLOCK;
+            let end = ((block + 1) * MOVE_BLOCK - self.table_start).min(to);
+            // Four running sets of extremes, merged at the end (extremes of the same
+            // moves whatever their grouping): four chains of comparisons side by side.
+            let mut lanes = [Moves::still(); 4];
+            let positions = &self.positions[from - chunk_start..end - chunk_start];
+            let reference = &self.reference[from..end];
+            let mut quads = positions.chunks_exact(4).zip(reference.chunks_exact(4));
+            for (p, q) in &mut quads {
+                for (lane, (p, q)) in lanes.iter_mut().zip(p.iter().zip(q)) {
+                    lane.add(nearest_separation(periodic_box, image, position(p) - *q));
+                }
+            }
+            let tail = positions.len() / 4 * 4;
+            for (p, q) in positions[tail..].iter().zip(&reference[tail..]) {
+                lanes[0].add(nearest_separation(periodic_box, image, position(p) - *q));
+            }
+            let moves = lanes[0].merge(lanes[1]).merge(lanes[2].merge(lanes[3]));
+            blocks.push((block, moves));
+            from = end;
+        }
+        blocks
+    }
+}
+
 /// Copies grain and wall state into the snapshot, reusing its allocations, and wraps the
 /// grains' positions into an unsheared periodic box as it copies them (the drift, just
 /// before, may have carried grains across a face; [`crate::periodic::PeriodicBox::wrapper`]).
@@ -533,9 +598,17 @@ pub fn gather_snapshot(
     >,
     walls: Query<(Entity, &Wall)>,
     periodic: Option<Res<crate::periodic::PeriodicBox>>,
+    deferred: Option<Res<crate::resources::DeferredKick>>,
 ) {
     let s = &mut *snapshot;
     s.set_periodic(periodic.map(|p| *p));
+    if deferred.is_some_and(|d| d.snapshot_holds_motion) {
+        // The first kick and the drift worked on the records in place
+        // ([`GrainSnapshot::kick_drift_held`]): nothing to copy.
+        s.refresh_held_motion();
+        gather_walls(s, &walls, false);
+        return;
+    }
     let n: usize = grains
         .contiguous_iter_mut()
         .expect("grain query is dense")
@@ -620,23 +693,17 @@ pub fn gather_snapshot(
                     let largest_radius = r[from..to]
                         .iter()
                         .fold(0.0, |largest, r| f64::max(largest, r.0));
-                    // The moves of each block of grains (by dense index) this chunk
-                    // holds a part of; a table need not start at a block's start.
-                    let mut blocks = SmallVec::new();
-                    if track_moves {
-                        let mut from = from;
-                        while from < to {
-                            let block = (table_start + from) / MOVE_BLOCK;
-                            let end = ((block + 1) * MOVE_BLOCK - table_start).min(to);
-                            let mut moves = Moves::still();
-                            let in_chunk = from - c * COPY_CHUNK..end - c * COPY_CHUNK;
-                            for (p, q) in positions[in_chunk].iter().zip(&reference[from..end]) {
-                                moves.add(nearest_separation(&periodic_box, &image, p.0 - *q));
-                            }
-                            blocks.push((block, moves));
-                            from = end;
-                        }
-                    }
+                    let blocks = if track_moves {
+                        let moved = MovedChunk {
+                            table_start,
+                            from,
+                            positions,
+                            reference,
+                        };
+                        moved.block_moves(|p| p.0, &periodic_box, &image)
+                    } else {
+                        SmallVec::new()
+                    };
                     (largest_radius, blocks)
                 }));
             },
@@ -668,13 +735,7 @@ pub fn gather_snapshot(
             }
         }
     }
-    s.moves = block_moves
-        .iter()
-        .fold(Moves::still(), |all, block| all.merge(*block));
-    s.block_moves.clear();
-    s.block_moves.extend(block_moves.iter().map(Moves::block));
-    s.block_scratch = block_moves;
-    s.chunk_scratch = chunk_results;
+    s.finish_moves(block_moves, chunk_results);
     if !track_moves || reordered {
         s.move_reference.clear();
     }
@@ -686,10 +747,16 @@ pub fn gather_snapshot(
             s.dense_of[e.index_u32() as usize] = i as u32;
         }
     }
+    gather_walls(s, &walls, reordered);
+}
+
+/// Copies the walls into the snapshot, and changes its layout when they or the grains
+/// (`grains_reordered`) changed.
+fn gather_walls(s: &mut GrainSnapshot, walls: &Query<(Entity, &Wall)>, grains_reordered: bool) {
     let walls_changed = s.walls.len() != walls.iter().len()
         || s.walls
             .iter()
-            .zip(&walls)
+            .zip(walls.iter())
             .any(|(old, (e, _))| old.entity != e);
     s.walls.clear();
     s.walls.extend(walls.iter().map(|(entity, wall)| WallState {
@@ -699,8 +766,118 @@ pub fn gather_snapshot(
         velocity: wall.velocity,
         material: wall.material.0,
     }));
-    if reordered || walls_changed {
+    if grains_reordered || walls_changed {
         s.layout = s.layout.wrapping_add(1).max(1);
+    }
+}
+
+/// One table of moving grains for [`GrainSnapshot::kick_drift_held`]: their entities,
+/// forces and masses.
+pub(crate) type HeldTable<'a> = (&'a [Entity], &'a [Force], &'a [Mass]);
+
+impl GrainSnapshot {
+    /// The first kick and the drift of the moving grains when the snapshot holds their
+    /// motion ([`crate::resources::DeferredKick::snapshot_holds_motion`]): `update` kicks
+    /// and drifts a record in place and returns the work of gravity over its drift. The
+    /// tables are those of the last gather, whose grains are consecutive in the snapshot.
+    /// Returns the work of gravity, per table the partial sums of the chunks of `chunk`
+    /// grains summed in order from `parallel_from` grains up, one sum below: the sums
+    /// the kick of the grains' components takes.
+    pub(crate) fn kick_drift_held<'a>(
+        &mut self,
+        moving: impl Iterator<Item = HeldTable<'a>>,
+        (chunk, parallel_from): (usize, usize),
+        update: impl Fn(&mut GrainRecord, &Force, &Mass) -> f64 + Sync,
+    ) -> f64 {
+        let mut work = 0.0;
+        let one_chunk = |(records, (f, m)): (&mut [GrainRecord], (&[Force], &[Mass]))| {
+            records
+                .iter_mut()
+                .zip(f.iter().zip(m))
+                .map(|(r, (f, m))| update(r, f, m))
+                .sum::<f64>()
+        };
+        for (entities, forces, masses) in moving {
+            let Some(first) = entities.first() else {
+                continue;
+            };
+            let start = self.dense_of[first.index_u32() as usize] as usize;
+            let range = start..start + entities.len();
+            debug_assert_eq!(&self.entity[range.clone()], entities);
+            let records = &mut self.records[range];
+            work += if records.len() >= parallel_from {
+                let chunks = records
+                    .par_chunks_mut(chunk)
+                    .zip(forces.par_chunks(chunk).zip(masses.par_chunks(chunk)));
+                let partial: Vec<f64> = chunks.map(one_chunk).collect();
+                partial.iter().sum::<f64>()
+            } else {
+                one_chunk((records, (forces, masses)))
+            };
+        }
+        work
+    }
+
+    /// The broad phase's pass when the snapshot holds the grains' motion: the grains are
+    /// those of the last step and their records were kicked and drifted in place
+    /// ([`Self::kick_drift_held`]), so only the wrap into an unsheared periodic box and the
+    /// moves since the reference are left, taken as [`gather_snapshot`]'s copy takes them.
+    fn refresh_held_motion(&mut self) {
+        let n = self.records.len();
+        let track_moves = self.move_reference.len() == n;
+        let wrap_box = self.periodic.filter(|b| b.shear.is_none());
+        let wrap = wrap_box.as_ref().map(|b| b.wrap_rule());
+        let (periodic_box, image) = (self.periodic, self.image);
+        let mut block_moves = std::mem::take(&mut self.block_scratch);
+        let mut chunk_results = std::mem::take(&mut self.chunk_scratch);
+        block_moves.clear();
+        chunk_results.clear();
+        if track_moves {
+            block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
+        }
+        if track_moves || wrap.is_some() {
+            let reference = &self.move_reference[..];
+            let chunks = self.records.par_chunks_mut(COPY_CHUNK).enumerate();
+            chunk_results.par_extend(chunks.map(|(c, records)| {
+                if let Some(wrap) = &wrap {
+                    for record in records.iter_mut() {
+                        wrap.apply(&mut record.position);
+                    }
+                }
+                let blocks = if track_moves {
+                    let from = c * COPY_CHUNK;
+                    let moved = MovedChunk {
+                        table_start: 0,
+                        from,
+                        positions: records,
+                        reference,
+                    };
+                    moved.block_moves(|r| r.position, &periodic_box, &image)
+                } else {
+                    SmallVec::new()
+                };
+                (0.0, blocks)
+            }));
+        }
+        for (_, blocks) in chunk_results.drain(..) {
+            for (block, moves) in blocks {
+                block_moves[block] = block_moves[block].merge(moves);
+            }
+        }
+        self.finish_moves(block_moves, chunk_results);
+    }
+
+    /// Stores the moves of the blocks of grains found by a gather (and the whole
+    /// packing's, merged from them), returning the scratch lists to the snapshot.
+    fn finish_moves(&mut self, block_moves: Vec<Moves>, chunk_results: Vec<ChunkMoves>) {
+        self.moves = block_moves
+            .iter()
+            .fold(Moves::still(), |all, block| all.merge(*block));
+        self.block_moves.clear();
+        self.block_moves
+            .extend(block_moves.iter().map(Moves::block));
+        self.block_scratch = block_moves;
+        self.chunk_scratch = chunk_results;
     }
 }
 
