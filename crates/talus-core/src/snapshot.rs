@@ -528,6 +528,60 @@ fn copy_column<T: Sync, U: Send>(dst: &mut [U], src: &[T], value: impl Fn(&T) ->
 /// heap).
 type ChunkMoves = (f64, SmallVec<[(usize, Moves); 20]>);
 
+/// Four running sets of [`Moves`], one per lane of four grains' displacements.
+struct MovesLanes {
+    largest_sq: F4,
+    low: V4,
+    high: V4,
+}
+
+impl MovesLanes {
+    /// No displacement yet.
+    #[inline(always)]
+    fn still() -> Self {
+        Self {
+            largest_sq: F4::zero(),
+            low: V4::splat(DVec3::splat(f64::INFINITY)),
+            high: V4::splat(DVec3::splat(f64::NEG_INFINITY)),
+        }
+    }
+
+    /// Adds four displacements, one a lane, with [`Moves::add`]'s comparisons.
+    #[inline(always)]
+    fn add(&mut self, d: V4) {
+        let larger = |a: F4, b: F4| b.gt(a).select(b, a);
+        let smaller = |a: F4, b: F4| b.lt(a).select(b, a);
+        self.largest_sq = larger(self.largest_sq, d.length_squared());
+        self.low = V4 {
+            x: smaller(self.low.x, d.x),
+            y: smaller(self.low.y, d.y),
+            z: smaller(self.low.z, d.z),
+        };
+        self.high = V4 {
+            x: larger(self.high.x, d.x),
+            y: larger(self.high.y, d.y),
+            z: larger(self.high.z, d.z),
+        };
+    }
+
+    /// The four lanes' moves merged into one set.
+    #[inline(always)]
+    fn merged(&self) -> Moves {
+        let (largest, low, high) = (
+            self.largest_sq.to_array(),
+            self.low.to_array(),
+            self.high.to_array(),
+        );
+        (0..4).fold(Moves::still(), |all, l| {
+            all.merge(Moves {
+                largest_sq: largest[l],
+                low: low[l],
+                high: high[l],
+            })
+        })
+    }
+}
+
 /// A chunk of one table's grains whose moves since the reference are to be taken: the
 /// grains `from..from + positions.len()` of the table that starts at dense index
 /// `table_start`, `reference` the table's part of the reference positions.
@@ -554,22 +608,27 @@ impl<T> MovedChunk<'_, T> {
         while from < to {
             let block = (self.table_start + from) / MOVE_BLOCK;
             let end = ((block + 1) * MOVE_BLOCK - self.table_start).min(to);
-            // Four running sets of extremes, merged at the end (extremes of the same
-            // moves whatever their grouping): four chains of comparisons side by side.
-            let mut lanes = [Moves::still(); 4];
             let positions = &self.positions[from - chunk_start..end - chunk_start];
             let reference = &self.reference[from..end];
-            let mut quads = positions.chunks_exact(4).zip(reference.chunks_exact(4));
-            for (p, q) in &mut quads {
-                for (lane, (p, q)) in lanes.iter_mut().zip(p.iter().zip(q)) {
-                    lane.add(nearest_separation(periodic_box, image, position(p) - *q));
+            let mut moves = Moves::still();
+            let mut tail = 0;
+            if periodic_box.is_none_or(|b| b.shear.is_none()) {
+                // Four grains at a time in AVX lanes (the nearest image of the unsheared
+                // rule, bit for bit), each lane a running set of extremes, merged at the
+                // end: the extremes of the same moves, whatever their grouping.
+                let rule = image.lanes();
+                let mut lanes = MovesLanes::still();
+                for (p, q) in positions.chunks_exact(4).zip(reference.chunks_exact(4)) {
+                    let p = V4::from_fn(|l| position(&p[l]));
+                    let q = V4::new([q[0], q[1], q[2], q[3]]);
+                    lanes.add(rule.apply(p - q));
                 }
+                moves = lanes.merged();
+                tail = positions.len() / 4 * 4;
             }
-            let tail = positions.len() / 4 * 4;
             for (p, q) in positions[tail..].iter().zip(&reference[tail..]) {
-                lanes[0].add(nearest_separation(periodic_box, image, position(p) - *q));
+                moves.add(nearest_separation(periodic_box, image, position(p) - *q));
             }
-            let moves = lanes[0].merge(lanes[1]).merge(lanes[2].merge(lanes[3]));
             blocks.push((block, moves));
             from = end;
         }
