@@ -485,16 +485,19 @@ impl Simulation {
     /// changes the grains: the step's second kick may be left to the next step's first kick
     /// ([`DeferredKick`](crate::resources::DeferredKick); the same bits, one pass over
     /// the grains fewer). A step whose kinetic energies are due
-    /// ([`KineticEnergyDue`](crate::resources::KineticEnergyDue)) kicks as usual. Call
-    /// [`Self::synchronize`] before reading velocities after such a step without
-    /// stepping again. A non-finite velocity this step produced shows at the next step.
+    /// ([`KineticEnergyDue`](crate::resources::KineticEnergyDue)) kicks as usual. Where
+    /// the plan allows it ([`Self::may_hold_motion`]) the grains' positions, velocities and
+    /// spins are then left in the snapshot, their components stale until the next step
+    /// that does not defer or [`Self::synchronize`]: call it before reading or changing
+    /// the grains after such a step without stepping again. A non-finite velocity this
+    /// step produced shows at the next step.
     pub fn step_before_another(&mut self) -> Result<(), BlowUp> {
         self.step_deferring(self.can_defer_kick)
     }
 
-    /// Applies the second kick a step left to the next one, if any
-    /// ([`Self::step_before_another`]): the grains' velocities and spins become the last
-    /// step's end state.
+    /// Writes back the motion the snapshot holds and applies the second kick a step left
+    /// to the next one, if any ([`Self::step_before_another`]): the grains' components
+    /// become the last step's end state.
     pub fn synchronize(&mut self) {
         integrate::write_back_held_motion(&mut self.world);
         integrate::apply_deferred_kick(&mut self.world);
