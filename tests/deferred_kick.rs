@@ -28,6 +28,15 @@ const FREE_FALL: &str = r#"Scene(
     output: (recording: false),
 )"#;
 
+/// Every grain's position, velocity and spin, as bits.
+fn state_bits(sim: &mut Simulation) -> Vec<u64> {
+    common::grains(sim)
+        .iter()
+        .flat_map(|g| [g.position, g.velocity, g.omega])
+        .flat_map(|v| v.to_array().map(f64::to_bits))
+        .collect()
+}
+
 fn pending(sim: &Simulation) -> bool {
     let d = sim.world.resource::<DeferredKick>();
     d.translation.is_some() || d.rotation.is_some()
@@ -81,13 +90,6 @@ fn free_fall_is_exact_through_deferred_kicks() {
 #[test]
 fn deferred_kicks_leave_the_step_by_step_state_to_the_bit() {
     let text = common::settling_box_scene("deferred", 15000);
-    let bits = |sim: &mut Simulation| {
-        common::grains(sim)
-            .iter()
-            .flat_map(|g| [g.position, g.velocity, g.omega])
-            .flat_map(|v| v.to_array().map(f64::to_bits))
-            .collect::<Vec<u64>>()
-    };
     let (mut stepwise, steps) = common::build(&text);
     for _ in 0..steps {
         stepwise.step().unwrap();
@@ -127,7 +129,7 @@ fn deferred_kicks_leave_the_step_by_step_state_to_the_bit() {
             .snapshot_holds_motion
     );
 
-    let reference = bits(&mut stepwise);
+    let reference = state_bits(&mut stepwise);
     let contacts = stepwise.world.resource::<EnergySnapshot>().contacts;
     eprintln!("{contacts} contacts");
     assert!(contacts > 50, "the grains must touch: {contacts} contacts");
@@ -137,14 +139,14 @@ fn deferred_kicks_leave_the_step_by_step_state_to_the_bit() {
             .any(|g| g.omega.length() > 1e-3),
         "the grains must spin"
     );
-    assert_eq!(bits(&mut batched), reference, "run_steps");
+    assert_eq!(state_bits(&mut batched), reference, "run_steps");
     assert_eq!(
-        bits(&mut synchronized),
+        state_bits(&mut synchronized),
         reference,
         "steps with kinetic energies due"
     );
     assert_eq!(
-        bits(&mut deferred),
+        state_bits(&mut deferred),
         reference,
         "deferred steps, then synchronize"
     );
@@ -215,13 +217,6 @@ fn a_system_that_reads_the_motion_inside_the_step_always_finds_it_current() {
         !build(false, true).may_hold_motion(),
         "an undeclared exclusive system"
     );
-    let bits = |sim: &mut Simulation| {
-        common::grains(sim)
-            .iter()
-            .flat_map(|g| [g.position, g.velocity, g.omega])
-            .flat_map(|v| v.to_array().map(f64::to_bits))
-            .collect::<Vec<u64>>()
-    };
     let mut stepwise = build(true, false);
     let mut deferred = build(true, false);
     assert!(!deferred.may_hold_motion(), "the drag reads the velocities");
@@ -244,9 +239,9 @@ fn a_system_that_reads_the_motion_inside_the_step_always_finds_it_current() {
     // The drag matters: without it the grains end elsewhere.
     let mut undragged = build(false, false);
     undragged.run_steps(3000).unwrap();
-    let reference = bits(&mut stepwise);
-    assert_ne!(bits(&mut undragged), reference);
-    assert_eq!(bits(&mut deferred), reference);
+    let reference = state_bits(&mut stepwise);
+    assert_ne!(state_bits(&mut undragged), reference);
+    assert_eq!(state_bits(&mut deferred), reference);
 }
 
 /// A velocity made non-finite while a kick is pending (here by a force set to NaN between

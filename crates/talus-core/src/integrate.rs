@@ -108,24 +108,6 @@ pub fn kick_drift_translation(
     }
 }
 
-/// The part of a snapshot array that holds the grains of one table, `entities` (the
-/// snapshot copies whole tables in order, so a table's grains are consecutive there).
-#[inline]
-fn held_range<'a, T>(
-    dense_of: &[u32],
-    snapshot_entities: &[Entity],
-    entities: &[Entity],
-    column: &'a mut [T],
-) -> &'a mut [T] {
-    let Some(first) = entities.first() else {
-        return &mut [];
-    };
-    let start = dense_of[first.index_u32() as usize] as usize;
-    let range = start..start + entities.len();
-    debug_assert_eq!(&snapshot_entities[range.clone()], entities);
-    &mut column[range]
-}
-
 /// Adds to `v` the pending second kick's `F/m` times `pending` (if any), then the first
 /// kick's times `kick`: the operations of the two separate passes, in their order. Under
 /// velocity Verlet the two kicks span the same half step, and their common increment is
@@ -172,8 +154,8 @@ pub fn first_kick_rotation(
     for (e, mut w, t, i) in grains.contiguous_iter_mut().expect("grain query is dense") {
         // The spins of the last step are the snapshot's when it holds the motion.
         finite &= if held {
-            let w = held_range(&s.dense_of, &s.entity, e, &mut s.omega);
-            kick_spins(w, |w| w, t, i, pending, kick)
+            let range = s.table_range(e);
+            kick_spins(&mut s.omega[range], |w| w, t, i, pending, kick)
         } else {
             kick_spins(
                 w.bypass_change_detection(),
@@ -434,10 +416,7 @@ fn copy_held_motion(
 ) {
     deferred.snapshot_holds_motion = false;
     for (e, mut p, mut v, mut w) in grains.contiguous_iter_mut().expect("grain query is dense") {
-        let Some(first) = e.first() else { continue };
-        let start = snapshot.dense_of[first.index_u32() as usize] as usize;
-        let range = start..start + e.len();
-        debug_assert_eq!(&snapshot.entity[range.clone()], e);
+        let range = snapshot.table_range(e);
         let (p, v, w) = (
             p.bypass_change_detection(),
             v.bypass_change_detection(),
@@ -703,43 +682,36 @@ pub fn health_check(
     if health.blow_up.is_some() {
         return;
     }
-    let held = deferred.is_some_and(|d| d.snapshot_holds_motion);
-    if let (false, true, Some(snapshot)) = (health.motion_finite, held, snapshot) {
-        // The last step's motion is the snapshot's; the forces are the components'.
-        let finite = |x: DVec3| x.is_finite();
-        let mut bad: Vec<Entity> = (0..snapshot.len())
-            .filter(|&k| {
-                let r = &snapshot.records[k];
-                !(finite(r.position) && finite(r.velocity) && finite(snapshot.omega[k]))
-            })
-            .map(|k| snapshot.entity[k])
-            .take(16)
-            .collect();
-        let forces: Vec<Entity> = grains
-            .iter()
-            .filter(|(e, .., f)| !f.0.is_finite() && !bad.contains(e))
-            .map(|(e, ..)| e)
-            .take(16 - bad.len())
-            .collect();
-        bad.extend(forces);
-        health.blow_up = Some(BlowUp {
-            step: clock.step,
-            reason: "a position, velocity, spin or force became NaN or infinite".into(),
-            entities: bad,
-        });
-        return;
-    }
     if !health.motion_finite {
-        let finite =
-            |(_, p, v, w, f): &(Entity, &Position, &Velocity, &AngularVelocity, &Force)| {
-                p.0.is_finite() && v.0.is_finite() && w.0.is_finite() && f.0.is_finite()
-            };
-        let bad: Vec<Entity> = grains
-            .iter()
-            .filter(|g| !finite(g))
-            .map(|(e, ..)| e)
-            .take(16)
-            .collect();
+        // The last step's motion is the snapshot's when it holds it, else the components';
+        // the forces are the components'.
+        let held = deferred.is_some_and(|d| d.snapshot_holds_motion);
+        let finite = |x: DVec3| x.is_finite();
+        let bad: Vec<Entity> = match snapshot.filter(|_| held) {
+            Some(s) => {
+                let motion = (0..s.len()).filter(|&k| {
+                    let r = &s.records[k];
+                    !(finite(r.position) && finite(r.velocity) && finite(s.omega[k]))
+                });
+                let mut bad: Vec<Entity> = motion.map(|k| s.entity[k]).take(16).collect();
+                let forces: Vec<Entity> = grains
+                    .iter()
+                    .filter(|(e, .., f)| !finite(f.0) && !bad.contains(e))
+                    .map(|(e, ..)| e)
+                    .take(16 - bad.len())
+                    .collect();
+                bad.extend(forces);
+                bad
+            }
+            None => grains
+                .iter()
+                .filter(|(_, p, v, w, f)| {
+                    !(finite(p.0) && finite(v.0) && finite(w.0) && finite(f.0))
+                })
+                .map(|(e, ..)| e)
+                .take(16)
+                .collect(),
+        };
         health.blow_up = Some(BlowUp {
             step: clock.step,
             reason: "a position, velocity, spin or force became NaN or infinite".into(),

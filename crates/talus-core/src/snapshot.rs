@@ -835,6 +835,19 @@ fn gather_walls(s: &mut GrainSnapshot, walls: &Query<(Entity, &Wall)>, grains_re
 pub(crate) type HeldTable<'a> = (&'a [Entity], &'a [Force], &'a [Mass]);
 
 impl GrainSnapshot {
+    /// The dense indices of one table's grains, `entities` in the table's order (a gather
+    /// copies whole tables in order, so a table's grains are consecutive in the snapshot);
+    /// empty for an empty table.
+    pub(crate) fn table_range(&self, entities: &[Entity]) -> std::ops::Range<usize> {
+        let Some(first) = entities.first() else {
+            return 0..0;
+        };
+        let start = self.dense_of[first.index_u32() as usize] as usize;
+        let range = start..start + entities.len();
+        debug_assert_eq!(&self.entity[range.clone()], entities);
+        range
+    }
+
     /// The first kick and the drift of the moving grains when the snapshot holds their
     /// motion ([`crate::resources::DeferredKick::snapshot_holds_motion`]): `update` kicks
     /// and drifts a record in place and returns the work of gravity over its drift. The
@@ -857,12 +870,7 @@ impl GrainSnapshot {
                 .sum::<f64>()
         };
         for (entities, forces, masses) in moving {
-            let Some(first) = entities.first() else {
-                continue;
-            };
-            let start = self.dense_of[first.index_u32() as usize] as usize;
-            let range = start..start + entities.len();
-            debug_assert_eq!(&self.entity[range.clone()], entities);
+            let range = self.table_range(entities);
             let records = &mut self.records[range];
             work += if records.len() >= parallel_from {
                 let chunks = records
