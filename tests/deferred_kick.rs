@@ -37,6 +37,13 @@ fn state_bits(sim: &mut Simulation) -> Vec<u64> {
         .collect()
 }
 
+/// Whether the coming steps sum the kinetic energies (only steps that do not may defer).
+fn energies_due(sim: &mut Simulation, due: bool) {
+    sim.world
+        .resource_mut::<talus::core::resources::KineticEnergyDue>()
+        .0 = due;
+}
+
 fn pending(sim: &Simulation) -> bool {
     let d = sim.world.resource::<DeferredKick>();
     d.translation.is_some() || d.rotation.is_some()
@@ -52,15 +59,10 @@ fn free_fall_is_exact_through_deferred_kicks() {
     let start = common::grains(&mut sim)[0];
     // A step followed by another, whose kinetic energies are not asked for, leaves its kick
     // pending: the plan has nothing that reads the grains between steps.
-    let due = |sim: &mut Simulation, due: bool| {
-        sim.world
-            .resource_mut::<talus::core::resources::KineticEnergyDue>()
-            .0 = due;
-    };
-    due(&mut sim, false);
+    energies_due(&mut sim, false);
     sim.step_before_another().unwrap();
     assert!(pending(&sim), "the free fall's plan allows deferring");
-    due(&mut sim, true);
+    energies_due(&mut sim, true);
     sim.run_steps(steps - 1).unwrap();
     assert!(
         !pending(&sim),
@@ -104,10 +106,7 @@ fn deferred_kicks_leave_the_step_by_step_state_to_the_bit() {
     // due (the default is due every step): this one ran every kick itself.
     assert!(!pending(&synchronized));
     let (mut deferred, _) = common::build(&text);
-    deferred
-        .world
-        .resource_mut::<talus::core::resources::KineticEnergyDue>()
-        .0 = false;
+    energies_due(&mut deferred, false);
     assert!(deferred.may_hold_motion(), "the box's plan reads no motion");
     for _ in 0..steps {
         deferred.step_before_another().unwrap();
@@ -173,10 +172,7 @@ fn a_plan_that_reads_between_steps_never_defers() {
     };
     let mut plain = build();
     let mut asked = build();
-    asked
-        .world
-        .resource_mut::<talus::core::resources::KineticEnergyDue>()
-        .0 = false;
+    energies_due(&mut asked, false);
     for _ in 0..60 {
         plain.step().unwrap();
         asked.step_before_another().unwrap();
@@ -220,10 +216,7 @@ fn a_system_that_reads_the_motion_inside_the_step_always_finds_it_current() {
     let mut stepwise = build(true, false);
     let mut deferred = build(true, false);
     assert!(!deferred.may_hold_motion(), "the drag reads the velocities");
-    deferred
-        .world
-        .resource_mut::<talus::core::resources::KineticEnergyDue>()
-        .0 = false;
+    energies_due(&mut deferred, false);
     for _ in 0..3000 {
         stepwise.step().unwrap();
         deferred.step_before_another().unwrap();
@@ -251,9 +244,7 @@ fn a_system_that_reads_the_motion_inside_the_step_always_finds_it_current() {
 fn a_non_finite_velocity_is_caught_through_a_pending_kick() {
     for defer in [false, true] {
         let (mut sim, _) = common::build(FREE_FALL);
-        sim.world
-            .resource_mut::<talus::core::resources::KineticEnergyDue>()
-            .0 = !defer;
+        energies_due(&mut sim, !defer);
         sim.step_before_another().unwrap();
         sim.step_before_another().unwrap();
         assert_eq!(pending(&sim), defer);
@@ -273,9 +264,7 @@ fn a_non_finite_velocity_is_caught_through_a_pending_kick() {
 #[test]
 fn a_non_finite_velocity_is_caught_in_the_motion_the_snapshot_holds() {
     let (mut sim, _) = common::build(FREE_FALL);
-    sim.world
-        .resource_mut::<talus::core::resources::KineticEnergyDue>()
-        .0 = false;
+    energies_due(&mut sim, false);
     sim.step_before_another().unwrap();
     sim.step_before_another().unwrap();
     assert!(sim.world.resource::<DeferredKick>().snapshot_holds_motion);
