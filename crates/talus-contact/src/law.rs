@@ -12,6 +12,7 @@ use bevy_ecs::prelude::*;
 use talus_core::energy::{DissipationChannels, MAX_DISSIPATION_CHANNELS};
 use talus_core::lanes::{F4, V4};
 use talus_core::schedule::{SimBuilder, Stage};
+use talus_core::snapshot::prefetch_item;
 
 use crate::components::*;
 use crate::kinematics::{ContactKinematics, ContactKinematicsLanes};
@@ -319,7 +320,16 @@ fn recycle_contacts<L: ContactLaw>(
             bodies.bypass_change_detection(),
             history.bypass_change_detection(),
         );
-        for &(entity, row, pair, pair_bodies) in reuses {
+        for (k, &(entity, row, pair, pair_bodies)) in reuses.iter().enumerate() {
+            // The rows are few and far apart: ask for those of a few contacts ahead.
+            if let Some(&(_, ahead, _, _)) = reuses.get(k + RECYCLE_AHEAD) {
+                prefetch_item(entities, ahead);
+                prefetch_item(contact, ahead);
+                prefetch_item(geometry, ahead);
+                prefetch_item(force, ahead);
+                prefetch_item(bodies, ahead);
+                prefetch_item(history, ahead);
+            }
             if entities.get(row) != Some(&entity) {
                 continue;
             }
@@ -337,6 +347,9 @@ fn recycle_contacts<L: ContactLaw>(
         "the narrow phase recycles only contacts of the law's archetype"
     );
 }
+
+/// How many contacts ahead [`recycle_contacts`] asks for the rows it will write.
+const RECYCLE_AHEAD: usize = 4;
 
 /// Re-creates a saved contact of law `L`: its geometry and force of the last evaluation
 /// (which the next step reads) and its history parsed from RON text.
