@@ -2,14 +2,15 @@
 //! kick (`DeferredKick`), and the grains' motion in the snapshot: free fall stays exact, the
 //! state after any run is the one step-by-step integration gives to the bit, nothing
 //! between two steps ever sees a half-kicked grain, no system that reads the grains'
-//! motion ever finds it stale, and a non-finite velocity is still caught.
+//! motion ever finds it stale, and a non-finite velocity is still caught. The frozen grains'
+//! force totals, left unsummed between unobserved steps, come back to the bit.
 
 mod common;
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
 use talus::core::prelude::*;
-use talus::core::resources::DeferredKick;
+use talus::core::resources::{DeferredKick, FrozenTotals};
 use talus::core::schedule::{Simulation, Stage};
 
 /// One grain thrown up and sideways with a spin, no wall, no partner: nothing but gravity.
@@ -235,6 +236,122 @@ fn a_system_that_reads_the_motion_inside_the_step_always_finds_it_current() {
     let reference = state_bits(&mut stepwise);
     assert_ne!(state_bits(&mut undragged), reference);
     assert_eq!(state_bits(&mut deferred), reference);
+}
+
+/// Every grain's force and torque totals, as bits: the frozen grains' or the others'.
+fn totals_bits(sim: &mut Simulation, frozen: bool) -> Vec<u64> {
+    let mut q = sim
+        .world
+        .query_filtered::<(&Force, &Torque, Has<Frozen>), With<Grain>>();
+    q.iter(&sim.world)
+        .filter(|&(.., f)| f == frozen)
+        .flat_map(|(f, t, _)| [f.0, t.0])
+        .flat_map(|v| v.to_array().map(f64::to_bits))
+        .collect()
+}
+
+/// LAMMPS's chute benchmark as shipped (32,000 grains, 912 of them a frozen base).
+fn build_chute() -> Simulation {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench/chute.ron");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let scene = talus::scene::parse(&path, &text).unwrap_or_else(|e| panic!("{e}"));
+    scene
+        .build(&talus::registry())
+        .unwrap_or_else(|e| panic!("{e}"))
+        .builder
+        .build()
+}
+
+/// The frozen grains' force and torque totals, which nothing inside a step reads, are left
+/// unsummed by the steps whose end nothing observes (`FrozenTotals`) and summed again by
+/// `synchronize` or by the next observed step: after either, every grain's totals, frozen
+/// or not, and every grain's motion are those of the same steps taken one by one, to the
+/// bit. LAMMPS's chute, whose frozen base carries the flow.
+#[test]
+fn frozen_grains_totals_left_between_unobserved_steps_are_summed_to_the_bit() {
+    const STEPS: usize = 20;
+    let mut stepwise = build_chute();
+    for _ in 0..STEPS {
+        stepwise.step().unwrap();
+    }
+    let frozen_reference = totals_bits(&mut stepwise, true);
+    let moving_reference = totals_bits(&mut stepwise, false);
+    assert_eq!(frozen_reference.len(), 912 * 6);
+    // The base carries the flow: its totals are more than its weights.
+    let mut q = stepwise
+        .world
+        .query_filtered::<(&Force, &Mass), (With<Grain>, With<Frozen>)>();
+    let g = stepwise.config().gravity;
+    let loaded = q
+        .iter(&stepwise.world)
+        .filter(|(f, m)| (f.0 - m.0 * g).length() > 1e-3 * m.0 * g.length())
+        .count();
+    assert!(loaded > 100, "only {loaded} frozen grains touch the flow");
+
+    // Unobserved steps, then `synchronize`.
+    let mut deferred = build_chute();
+    assert!(
+        deferred.world.resource::<FrozenTotals>().may_leave,
+        "nothing in the chute's plan reads the totals"
+    );
+    energies_due(&mut deferred, false);
+    for _ in 0..STEPS {
+        deferred.step_before_another().unwrap();
+    }
+    assert!(deferred.world.resource::<FrozenTotals>().pending);
+    assert_ne!(
+        totals_bits(&mut deferred, true),
+        frozen_reference,
+        "left unsummed, the frozen totals are an earlier step's"
+    );
+    assert_eq!(totals_bits(&mut deferred, false), moving_reference);
+    deferred.synchronize();
+    assert!(!deferred.world.resource::<FrozenTotals>().pending);
+    assert_eq!(totals_bits(&mut deferred, true), frozen_reference);
+    assert_eq!(state_bits(&mut deferred), state_bits(&mut stepwise));
+
+    // Unobserved steps ended by an observed one: no synchronize needed for the totals.
+    let mut reported = build_chute();
+    energies_due(&mut reported, false);
+    for _ in 0..STEPS - 1 {
+        reported.step_before_another().unwrap();
+    }
+    energies_due(&mut reported, true);
+    reported.step_before_another().unwrap();
+    assert!(!reported.world.resource::<FrozenTotals>().pending);
+    assert_eq!(totals_bits(&mut reported, true), frozen_reference);
+    assert_eq!(totals_bits(&mut reported, false), moving_reference);
+}
+
+/// A system of the plan that reads the grains' force totals, or takes the whole world
+/// without declaring otherwise, keeps every step summing the frozen grains' totals.
+#[test]
+fn a_system_that_reads_the_totals_keeps_the_frozen_ones_summed() {
+    let build = |reader: bool, exclusive: bool| {
+        let text = common::settling_box_scene("totals", 10);
+        let scene = talus::scene::parse("totals.ron", &text).unwrap();
+        let mut builder = scene.build(&talus::registry()).unwrap().builder;
+        if reader {
+            builder.add_system(
+                Stage::ContactForces,
+                "force reader",
+                |grains: Query<&Force, With<Grain>>| {
+                    std::hint::black_box(grains.iter().count());
+                },
+            );
+        }
+        if exclusive {
+            builder.add_system(Stage::NarrowPhase, "whole world", |_: &mut World| {});
+        }
+        builder.build()
+    };
+    let may_leave = |sim: Simulation| sim.world.resource::<FrozenTotals>().may_leave;
+    assert!(may_leave(build(false, false)));
+    assert!(!may_leave(build(true, false)), "a system that reads Force");
+    assert!(
+        !may_leave(build(false, true)),
+        "an undeclared exclusive system"
+    );
 }
 
 /// A velocity made non-finite while a kick is pending (here by a force set to NaN between

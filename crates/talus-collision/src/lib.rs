@@ -46,7 +46,8 @@ impl Plugin for CollisionPlugin {
             narrow::update_contacts,
         );
         // It takes the world to spawn and despawn contacts; it reads the grains only
-        // through the snapshot.
+        // through the snapshot, and no force total.
         sim.declare_motion_free(&narrow::update_contacts);
+        sim.declare_frozen_totals_unread(&narrow::update_contacts);
     }
 }

@@ -112,6 +112,10 @@ impl Plugin for ContactPlugin {
             "apply_contact_forces",
             apply_contact_forces,
         );
+        // The sums write the totals, the frozen grains' only where a step's end is looked
+        // at (`FrozenTotals`); synchronizing sums what a step left.
+        sim.declare_frozen_totals_unread(&apply_contact_forces);
+        sim.on_synchronize(sum_left_frozen_totals);
         sim.gravity_in_force_sums();
     }
 }
@@ -558,13 +562,31 @@ pub fn kinematics(snapshot: &GrainSnapshot, c: &Contact) -> ContactKinematics {
     bodies(snapshot, c, ContactBodies::default()).kin
 }
 
+/// The grains' force and torque totals and masses, as the force sums write them.
+type GrainTotals<'w, 's> = Query<
+    'w,
+    's,
+    (
+        Entity,
+        &'static mut Force,
+        &'static mut Torque,
+        &'static Mass,
+    ),
+    With<Grain>,
+>;
+
+/// The frozen grains, to tell their tables apart.
+type FrozenGrains<'w, 's> = Query<'w, 's, (), (With<Grain>, With<Frozen>)>;
+
 /// Sums contact forces and torques onto grains (overwriting last step's totals, the forces
 /// starting from the grains' weights: [`SimBuilder::gravity_in_force_sums`]) and
 /// walls, and the contact energies the force loops summed per chunk
 /// ([`ContactEnergyPartials`], emptied here) into the ledger and the energy snapshot.
 /// Every sum is taken in a fixed order (contacts in query order for each grain and wall,
 /// chunks in order for the energies), so the results are bit-reproducible on any number
-/// of threads; the grains' sums run in parallel over ranges of grains.
+/// of threads; the grains' sums run in parallel over ranges of grains. At a step that
+/// may leave them ([`FrozenTotals::leave_this_step`]) the frozen grains' totals are not
+/// summed ([`FrozenTotals::pending`]; [`sum_left_frozen_totals`] sums them later).
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn apply_contact_forces(
     snapshot: Res<GrainSnapshot>,
@@ -574,53 +596,37 @@ pub fn apply_contact_forces(
     mut energy: ResMut<EnergySnapshot>,
     mut partials: ResMut<ContactEnergyPartials>,
     contacts: Query<(&ContactBodies, &ContactForce)>,
-    mut grains: Query<(Entity, &mut Force, &mut Torque, &Mass), With<Grain>>,
+    (mut grains, frozen): (GrainTotals, FrozenGrains),
     mut walls: Query<(Entity, &mut WallLoad)>,
-    config: Res<SimConfig>,
+    (config, mut frozen_totals): (Res<SimConfig>, ResMut<FrozenTotals>),
     mut wall_force: Local<Vec<DVec3>>,
     mut picked: Local<Vec<Vec<u32>>>,
 ) {
-    let n = snapshot.len();
     wall_force.clear();
     wall_force.resize(snapshot.walls.len(), DVec3::ZERO);
     if ledger.dissipated.len() < channels.names.len() {
         ledger.dissipated.resize(channels.names.len(), 0.0);
     }
-    // Each grain sums its contacts' forces in table order, whichever thread does it, so
-    // the totals are the same bit for bit on any number of threads: the grains' force and
-    // torque columns (in snapshot order) are split into one range per thread, and each
-    // range's thread zeroes its range, reads every contact's body indices (written by the
-    // force loop) and adds the forces of those that touch it ([`sum_range`]). Counts, the
-    // worst overlap and the energies come summed per chunk from the force loop.
     let tables: Vec<(&[ContactBodies], &[ContactForce])> = contacts
         .contiguous_iter()
         .expect("contact query is dense")
         .collect();
-    let range = n.div_ceil(rayon::current_num_threads()).max(1);
-    let mut parts: Vec<(usize, &mut [Force], &mut [Torque], &[Mass])> = Vec::new();
-    let mut offset = 0;
-    for (e, f, t, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
-        debug_assert_eq!(&snapshot.entity[offset..offset + e.len()], e);
-        let f = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(f).0;
-        let t = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(t).0;
-        let len = e.len();
-        let shares = f
-            .chunks_mut(range)
-            .zip(t.chunks_mut(range))
-            .zip(m.chunks(range));
-        for (k, ((f, t), m)) in shares.enumerate() {
-            parts.push((offset + k * range, f, t, m));
-        }
-        offset += len;
-    }
-    picked.resize_with(parts.len(), Vec::new);
-    let pick = rayon::current_num_threads() > 1;
-    let g = config.gravity;
-    parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
-        |((first, force, torque, mass), picked)| {
-            sum_range(&tables, pick, first, force, torque, mass, g, picked)
-        },
+    let leave_frozen = frozen_totals.leave_this_step && clock.pass_dt != 0.0;
+    let which = if leave_frozen {
+        TotalsOf::MovingGrains
+    } else {
+        TotalsOf::AllGrains
+    };
+    let left = sum_grain_totals(
+        &snapshot,
+        &tables,
+        &mut grains,
+        &frozen,
+        which,
+        config.gravity,
+        &mut picked,
     );
+    frozen_totals.pending = left;
     if !wall_force.is_empty() {
         for &(bodies, forces) in &tables {
             for (b, f) in bodies.iter().zip(forces) {
@@ -673,7 +679,119 @@ pub fn apply_contact_forces(
     }
 }
 
-/// One thread's share of [`apply_contact_forces`]: sets the force totals of the grains
+/// Whose totals [`sum_grain_totals`] sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum TotalsOf {
+    /// Every grain's.
+    AllGrains,
+    /// Only those of the grains that move (not [`Frozen`]).
+    MovingGrains,
+    /// Only those of the frozen grains.
+    FrozenGrains,
+}
+
+/// Sets the force and torque totals of the grains `which` names from the contact tables
+/// (see [`sum_range`]); returns whether it left a table of frozen grains out.
+///
+/// Each grain sums its contacts' forces in table order, whichever thread does it, so the
+/// totals are the same bit for bit on any number of threads: the grains' force and
+/// torque columns (in snapshot order) are split into one range per thread, and each
+/// range's thread zeroes its range, reads every contact's body indices (written by the
+/// force loop) and adds the forces of those that touch it. Each grain table is a share of
+/// its own and each share reads every contact, so a table left out (the frozen base of a
+/// chute) spares a whole pass over the contacts.
+fn sum_grain_totals(
+    snapshot: &GrainSnapshot,
+    tables: &[(&[ContactBodies], &[ContactForce])],
+    grains: &mut GrainTotals,
+    frozen: &FrozenGrains,
+    which: TotalsOf,
+    g: DVec3,
+    picked: &mut Vec<Vec<u32>>,
+) -> bool {
+    let n = snapshot.len();
+    let range = n.div_ceil(rayon::current_num_threads()).max(1);
+    let mut parts: Vec<(usize, &mut [Force], &mut [Torque], &[Mass])> = Vec::new();
+    let mut offset = 0;
+    let mut left_frozen = false;
+    for (e, f, t, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
+        debug_assert_eq!(&snapshot.entity[offset..offset + e.len()], e);
+        let len = e.len();
+        // `Frozen` is a table component: a table's grains are all frozen or none is.
+        let is_frozen = e.first().is_some_and(|&first| frozen.contains(first));
+        let wanted = match which {
+            TotalsOf::AllGrains => true,
+            TotalsOf::MovingGrains => !is_frozen,
+            TotalsOf::FrozenGrains => is_frozen,
+        };
+        left_frozen |= is_frozen && !wanted;
+        if wanted {
+            let f = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(f).0;
+            let t = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(t).0;
+            let shares = f
+                .chunks_mut(range)
+                .zip(t.chunks_mut(range))
+                .zip(m.chunks(range));
+            for (k, ((f, t), m)) in shares.enumerate() {
+                parts.push((offset + k * range, f, t, m));
+            }
+        }
+        offset += len;
+    }
+    picked.resize_with(parts.len(), Vec::new);
+    let pick = rayon::current_num_threads() > 1;
+    parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
+        |((first, force, torque, mass), picked)| {
+            sum_range(tables, pick, first, force, torque, mass, g, picked)
+        },
+    );
+    left_frozen
+}
+
+/// Sums the frozen grains' force and torque totals that the last step left
+/// ([`FrozenTotals::pending`]) from the contact forces it stored, with the same sums in
+/// the same order as the step would have taken: called by
+/// [`Simulation::synchronize`](talus_core::schedule::Simulation::synchronize). Does
+/// nothing when none are pending.
+pub fn sum_left_frozen_totals(world: &mut World) {
+    use bevy_ecs::system::RunSystemOnce;
+    let pending = world
+        .get_resource::<FrozenTotals>()
+        .is_some_and(|f| f.pending);
+    if pending {
+        world
+            .run_system_once(sum_frozen_totals)
+            .expect("the contact resources are installed");
+    }
+}
+
+/// The system of [`sum_left_frozen_totals`].
+fn sum_frozen_totals(
+    snapshot: Res<GrainSnapshot>,
+    config: Res<SimConfig>,
+    mut frozen_totals: ResMut<FrozenTotals>,
+    contacts: Query<(&ContactBodies, &ContactForce)>,
+    mut grains: GrainTotals,
+    frozen: FrozenGrains,
+    mut picked: Local<Vec<Vec<u32>>>,
+) {
+    let tables: Vec<(&[ContactBodies], &[ContactForce])> = contacts
+        .contiguous_iter()
+        .expect("contact query is dense")
+        .collect();
+    sum_grain_totals(
+        &snapshot,
+        &tables,
+        &mut grains,
+        &frozen,
+        TotalsOf::FrozenGrains,
+        config.gravity,
+        &mut picked,
+    );
+    frozen_totals.pending = false;
+}
+
+/// One thread's share of [`sum_grain_totals`]: sets the force totals of the grains
 /// `first..first + force.len()` (in snapshot order) to their weights m `g` and their torque
 /// totals to zero, and adds to them, in table order, the forces and torques of the
 /// contacts that touch them.

@@ -231,6 +231,43 @@ pub struct DeferredKick {
     pub may_hold_motion: bool,
 }
 
+/// Whether a step sums the force and torque totals of the frozen grains
+/// ([`Frozen`](crate::components::Frozen)), which nothing in the step reads: a frozen
+/// grain is never kicked, and its totals are there for whoever looks at the grains after
+/// a step (a saved state, a user's query). A step run by
+/// [`Simulation::step_before_another`](crate::schedule::Simulation::step_before_another)
+/// whose end is not reported leaves them unsummed where the plan allows it
+/// ([`Self::may_leave`]); the next step that sums them, or
+/// [`Simulation::synchronize`](crate::schedule::Simulation::synchronize), brings them up
+/// to date from the contact forces, which stay stored with their contacts: the same
+/// sums in the same order, the same bits. In LAMMPS's chute the 912 frozen grains' share
+/// of the sums reads the whole contact table once more at every step.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrozenTotals {
+    /// Set when the simulation is built: true when no system of its plan but those
+    /// declared not to read them
+    /// ([`SimBuilder::declare_frozen_totals_unread`](crate::schedule::SimBuilder::declare_frozen_totals_unread))
+    /// reads the grains' `Force` or `Torque`, and a step may leave its kick pending.
+    pub may_leave: bool,
+    /// Set by the simulation before each step: whether this step may leave the frozen
+    /// grains' totals unsummed (a step that defers its kick and whose kinetic energies
+    /// are not due, in a plan that allows it).
+    pub leave_this_step: bool,
+    /// Set by the force sums when they left the frozen grains' totals unsummed: they are
+    /// an earlier step's until the next step that sums them or
+    /// [`Simulation::synchronize`](crate::schedule::Simulation::synchronize).
+    pub pending: bool,
+}
+
+/// Work a step may leave for later that [`Simulation::synchronize`] has to finish, one
+/// function per plugin that leaves some (the contact crate's frozen grains' totals,
+/// [`FrozenTotals`]): each is called after the held motion is written back and the
+/// pending kick applied, and does nothing when it has nothing pending.
+///
+/// [`Simulation::synchronize`]: crate::schedule::Simulation::synchronize
+#[derive(Resource, Clone, Debug, Default)]
+pub struct SynchronizeHooks(pub Vec<fn(&mut World)>);
+
 /// Set by a protocol system (a packing generator reaching its target, say) when the run
 /// has done what it was for; the driver ends the run after the step and reports the reason.
 #[derive(Resource, Clone, Debug, Default, PartialEq)]

@@ -123,6 +123,9 @@ pub struct SimBuilder {
     /// integrator, snapshot and health check, and systems that declare no such access but
     /// take the whole world.
     motion_free: Vec<std::any::TypeId>,
+    /// The system types declared not to read the frozen grains' force and torque totals
+    /// ([`Self::declare_frozen_totals_unread`]).
+    frozen_totals_unread: Vec<std::any::TypeId>,
 }
 
 impl SimBuilder {
@@ -136,6 +139,8 @@ impl SimBuilder {
         world.insert_resource(Health::default());
         world.insert_resource(crate::resources::KineticEnergyDue::default());
         world.insert_resource(crate::resources::DeferredKick::default());
+        world.insert_resource(crate::resources::FrozenTotals::default());
+        world.insert_resource(crate::resources::SynchronizeHooks::default());
         world.insert_resource(DissipationChannels::default());
         world.insert_resource(EnergyLedger::default());
         world.insert_resource(EnergySnapshot::default());
@@ -172,6 +177,7 @@ impl SimBuilder {
             core_installed: false,
             reads_between_steps: false,
             motion_free: Vec::new(),
+            frozen_totals_unread: Vec::new(),
         };
         // The core's own systems that read or change the grains' motion know where it is
         // (`DeferredKick::snapshot_holds_motion`).
@@ -180,6 +186,15 @@ impl SimBuilder {
         builder.declare_motion_free(&snapshot::gather_snapshot);
         builder.declare_motion_free(&integrate::second_kick_and_kinetic_energy);
         builder.declare_motion_free(&integrate::health_check);
+        // The integrators read the totals of the grains they move only; the health check
+        // looks for non-finite ones, which a frozen grain's contact gives its partner too.
+        builder.declare_frozen_totals_unread(&integrate::kick_drift_translation);
+        builder.declare_frozen_totals_unread(&integrate::first_kick_rotation);
+        builder.declare_frozen_totals_unread(&integrate::second_kick_and_kinetic_energy);
+        builder.declare_frozen_totals_unread(&integrate::kinetic_energy);
+        builder.declare_frozen_totals_unread(&crate::gear::gear_predict);
+        builder.declare_frozen_totals_unread(&crate::gear::gear_correct);
+        builder.declare_frozen_totals_unread(&integrate::health_check);
         for stage in Stage::ALL {
             builder.add_hidden(stage, mark_stage(stage));
         }
@@ -360,18 +375,40 @@ impl SimBuilder {
         self.motion_free.push(std::any::TypeId::of::<F::System>());
     }
 
-    /// Whether a system of the step, other than those of [`Self::declare_motion_free`],
-    /// takes the whole world or declares an access to the grains' positions, velocities or
-    /// spins. Builds the schedule to read the systems' accesses; true if it cannot.
-    fn others_touch_motion(&mut self) -> bool {
-        use crate::components::{AngularVelocity, Position, Velocity};
+    /// Declares that a system added with [`Self::add_system`] reads no frozen grain's
+    /// force or torque total (`Force`, `Torque` of a grain with `Frozen`), whatever access
+    /// it declares: the sums that write them, systems that read the moving grains' only,
+    /// systems that take the whole world but not for them. A step whose end nothing
+    /// observes may then leave those totals unsummed
+    /// ([`FrozenTotals`](crate::resources::FrozenTotals)); a system that takes the whole
+    /// world or declares an access to `Force` or `Torque` without this declaration keeps
+    /// them summed at every step.
+    pub fn declare_frozen_totals_unread<F: IntoSystem<(), (), M>, M>(&mut self, _system: &F) {
+        self.frozen_totals_unread
+            .push(std::any::TypeId::of::<F::System>());
+    }
+
+    /// Adds a function [`Simulation::synchronize`] calls to finish what a step left for
+    /// later ([`SynchronizeHooks`](crate::resources::SynchronizeHooks)).
+    pub fn on_synchronize(&mut self, hook: fn(&mut World)) {
+        let mut hooks = self
+            .world
+            .resource_mut::<crate::resources::SynchronizeHooks>();
+        if !hooks.0.contains(&hook) {
+            hooks.0.push(hook);
+        }
+    }
+
+    /// Whether a system of the step, other than those in `declared`, takes the whole
+    /// world or declares an access to one of `components`. Builds the schedule to read
+    /// the systems' accesses; true if it cannot.
+    fn others_access(
+        &mut self,
+        components: &[bevy_ecs::component::ComponentId],
+        declared: &[std::any::TypeId],
+    ) -> bool {
         use bevy_ecs::schedule::ApplyDeferred;
         use bevy_ecs::system::SystemAccess;
-        let motion = [
-            self.world.register_component::<Position>(),
-            self.world.register_component::<Velocity>(),
-            self.world.register_component::<AngularVelocity>(),
-        ];
         if self.schedule.initialize(&mut self.world).is_err() {
             return true;
         }
@@ -380,7 +417,7 @@ impl SimBuilder {
         };
         systems.any(|(_, s)| {
             let kind = s.system().system_type();
-            if self.motion_free.contains(&kind) || kind == std::any::TypeId::of::<ApplyDeferred>() {
+            if declared.contains(&kind) || kind == std::any::TypeId::of::<ApplyDeferred>() {
                 return false;
             }
             match s.access() {
@@ -388,10 +425,41 @@ impl SimBuilder {
                 SystemAccess::Exclusive => true,
                 SystemAccess::Shared(access) => {
                     let access = access.combined_access();
-                    motion.iter().any(|&c| access.has_read(c))
+                    components.iter().any(|&c| access.has_read(c))
                 }
             }
         })
+    }
+
+    /// Whether a system of the step, other than those of [`Self::declare_motion_free`],
+    /// takes the whole world or declares an access to the grains' positions, velocities or
+    /// spins.
+    fn others_touch_motion(&mut self) -> bool {
+        use crate::components::{AngularVelocity, Position, Velocity};
+        let motion = [
+            self.world.register_component::<Position>(),
+            self.world.register_component::<Velocity>(),
+            self.world.register_component::<AngularVelocity>(),
+        ];
+        let declared = std::mem::take(&mut self.motion_free);
+        let touch = self.others_access(&motion, &declared);
+        self.motion_free = declared;
+        touch
+    }
+
+    /// Whether a system of the step, other than those of
+    /// [`Self::declare_frozen_totals_unread`], takes the whole world or declares an access
+    /// to the grains' force or torque totals.
+    fn others_read_totals(&mut self) -> bool {
+        use crate::components::{Force, Torque};
+        let totals = [
+            self.world.register_component::<Force>(),
+            self.world.register_component::<Torque>(),
+        ];
+        let declared = std::mem::take(&mut self.frozen_totals_unread);
+        let read = self.others_access(&totals, &declared);
+        self.frozen_totals_unread = declared;
+        read
     }
 
     /// Finishes the simulation. Initial forces are evaluated on the first step call.
@@ -407,6 +475,12 @@ impl SimBuilder {
         self.world
             .resource_mut::<crate::resources::DeferredKick>()
             .may_hold_motion = can_hold_motion;
+        // Likewise the frozen grains' totals may be left unsummed only where no other
+        // system could read them.
+        let can_leave_frozen_totals = can_defer_kick && !self.others_read_totals();
+        self.world
+            .resource_mut::<crate::resources::FrozenTotals>()
+            .may_leave = can_leave_frozen_totals;
         Simulation {
             world: self.world,
             schedule: self.schedule,
@@ -473,6 +547,9 @@ impl Simulation {
         }
         self.primed = true;
         self.world.resource_mut::<Clock>().pass_dt = 0.0;
+        self.world
+            .resource_mut::<crate::resources::FrozenTotals>()
+            .leave_this_step = false;
         self.run_pass()
     }
 
@@ -489,18 +566,29 @@ impl Simulation {
     /// the plan allows it ([`Self::may_hold_motion`]) the grains' positions, velocities and
     /// spins are then left in the snapshot, their components stale until the next step
     /// that does not defer or [`Self::synchronize`]: call it before reading or changing
-    /// the grains after such a step without stepping again. A non-finite velocity this
+    /// the grains after such a step without stepping again. So are the frozen grains'
+    /// force and torque totals where the plan allows it
+    /// ([`FrozenTotals`](crate::resources::FrozenTotals)). A non-finite velocity this
     /// step produced shows at the next step.
     pub fn step_before_another(&mut self) -> Result<(), BlowUp> {
         self.step_deferring(self.can_defer_kick)
     }
 
-    /// Writes back the motion the snapshot holds and applies the second kick a step left
-    /// to the next one, if any ([`Self::step_before_another`]): the grains' components
-    /// become the last step's end state.
+    /// Writes back the motion the snapshot holds, applies the second kick a step left
+    /// to the next one, if any ([`Self::step_before_another`]), and finishes what else the
+    /// step left ([`SynchronizeHooks`](crate::resources::SynchronizeHooks): the frozen
+    /// grains' force totals): the grains' components become the last step's end state.
     pub fn synchronize(&mut self) {
         integrate::write_back_held_motion(&mut self.world);
         integrate::apply_deferred_kick(&mut self.world);
+        let hooks = self
+            .world
+            .resource::<crate::resources::SynchronizeHooks>()
+            .0
+            .clone();
+        for hook in hooks {
+            hook(&mut self.world);
+        }
     }
 
     fn step_deferring(&mut self, defer: bool) -> Result<(), BlowUp> {
@@ -517,6 +605,10 @@ impl Simulation {
         self.world
             .resource_mut::<crate::resources::DeferredKick>()
             .allowed = defer;
+        {
+            let mut frozen = self.world.resource_mut::<crate::resources::FrozenTotals>();
+            frozen.leave_this_step = frozen.may_leave && defer && !due;
+        }
         let dt = self.world.resource::<SimConfig>().dt;
         {
             let mut clock = self.world.resource_mut::<Clock>();
