@@ -266,14 +266,24 @@ fn build_chute() -> Simulation {
 /// unsummed by the steps whose end nothing observes (`FrozenTotals`) and summed again by
 /// `synchronize` or by the next observed step: after either, every grain's totals, frozen
 /// or not, and every grain's motion are those of the same steps taken one by one, to the
-/// bit. LAMMPS's chute, whose frozen base carries the flow.
+/// bit. LAMMPS's chute, whose frozen base carries the flow; the reference on 1 thread,
+/// the deferred runs on 2 (whose sums pick each thread's grains' sides).
 #[test]
 fn frozen_grains_totals_left_between_unobserved_steps_are_summed_to_the_bit() {
     const STEPS: usize = 20;
+    let pool = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+    };
+    let (one, two) = (pool(1), pool(2));
     let mut stepwise = build_chute();
-    for _ in 0..STEPS {
-        stepwise.step().unwrap();
-    }
+    one.install(|| {
+        for _ in 0..STEPS {
+            stepwise.step().unwrap();
+        }
+    });
     let frozen_reference = totals_bits(&mut stepwise, true);
     let moving_reference = totals_bits(&mut stepwise, false);
     assert_eq!(frozen_reference.len(), 912 * 6);
@@ -295,9 +305,11 @@ fn frozen_grains_totals_left_between_unobserved_steps_are_summed_to_the_bit() {
         "nothing in the chute's plan reads the totals"
     );
     energies_due(&mut deferred, false);
-    for _ in 0..STEPS {
-        deferred.step_before_another().unwrap();
-    }
+    two.install(|| {
+        for _ in 0..STEPS {
+            deferred.step_before_another().unwrap();
+        }
+    });
     assert!(deferred.world.resource::<FrozenTotals>().pending);
     assert_ne!(
         totals_bits(&mut deferred, true),
@@ -305,7 +317,7 @@ fn frozen_grains_totals_left_between_unobserved_steps_are_summed_to_the_bit() {
         "left unsummed, the frozen totals are an earlier step's"
     );
     assert_eq!(totals_bits(&mut deferred, false), moving_reference);
-    deferred.synchronize();
+    two.install(|| deferred.synchronize());
     assert!(!deferred.world.resource::<FrozenTotals>().pending);
     assert_eq!(totals_bits(&mut deferred, true), frozen_reference);
     assert_eq!(state_bits(&mut deferred), state_bits(&mut stepwise));
@@ -313,11 +325,13 @@ fn frozen_grains_totals_left_between_unobserved_steps_are_summed_to_the_bit() {
     // Unobserved steps ended by an observed one: no synchronize needed for the totals.
     let mut reported = build_chute();
     energies_due(&mut reported, false);
-    for _ in 0..STEPS - 1 {
-        reported.step_before_another().unwrap();
-    }
+    two.install(|| {
+        for _ in 0..STEPS - 1 {
+            reported.step_before_another().unwrap();
+        }
+    });
     energies_due(&mut reported, true);
-    reported.step_before_another().unwrap();
+    two.install(|| reported.step_before_another().unwrap());
     assert!(!reported.world.resource::<FrozenTotals>().pending);
     assert_eq!(totals_bits(&mut reported, true), frozen_reference);
     assert_eq!(totals_bits(&mut reported, false), moving_reference);

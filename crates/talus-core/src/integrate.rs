@@ -670,14 +670,29 @@ fn lanes1<T>(k: usize, live: usize, column: &[T], value: impl Fn(&T) -> f64) -> 
 }
 
 /// Stops the run on a non-finite velocity or spin after the kick (a non-finite force or
-/// position reaches one), or on an overlap beyond the bound in [`Health`].
+/// position reaches one), or on an overlap beyond the bound in [`Health`]. The grains it
+/// names are those with a non-finite position, velocity or spin, or a moving grain with a
+/// non-finite force: a frozen grain's force total is not read (it may be left unsummed,
+/// [`FrozenTotals`](crate::resources::FrozenTotals)), and a contact that gives one a
+/// non-finite force gives its moving partner the same.
+#[allow(clippy::type_complexity)]
 pub fn health_check(
     clock: Res<Clock>,
     energy: Res<EnergySnapshot>,
     mut health: ResMut<Health>,
     deferred: Option<Res<DeferredKick>>,
     snapshot: Option<Res<GrainSnapshot>>,
-    grains: Query<(Entity, &Position, &Velocity, &AngularVelocity, &Force), With<Grain>>,
+    grains: Query<
+        (
+            Entity,
+            &Position,
+            &Velocity,
+            &AngularVelocity,
+            &Force,
+            Has<Frozen>,
+        ),
+        With<Grain>,
+    >,
 ) {
     if health.blow_up.is_some() {
         return;
@@ -687,6 +702,7 @@ pub fn health_check(
         // the forces are the components'.
         let held = deferred.is_some_and(|d| d.snapshot_holds_motion);
         let finite = |x: DVec3| x.is_finite();
+        let force_finite = |f: &Force, frozen: bool| frozen || finite(f.0);
         let bad: Vec<Entity> = match snapshot.filter(|_| held) {
             Some(s) => {
                 let motion = (0..s.len()).filter(|&k| {
@@ -696,7 +712,7 @@ pub fn health_check(
                 let mut bad: Vec<Entity> = motion.map(|k| s.entity[k]).take(16).collect();
                 let forces: Vec<Entity> = grains
                     .iter()
-                    .filter(|(e, .., f)| !finite(f.0) && !bad.contains(e))
+                    .filter(|&(e, .., f, frozen)| !force_finite(f, frozen) && !bad.contains(&e))
                     .map(|(e, ..)| e)
                     .take(16 - bad.len())
                     .collect();
@@ -705,8 +721,8 @@ pub fn health_check(
             }
             None => grains
                 .iter()
-                .filter(|(_, p, v, w, f)| {
-                    !(finite(p.0) && finite(v.0) && finite(w.0) && finite(f.0))
+                .filter(|&(_, p, v, w, f, frozen)| {
+                    !(finite(p.0) && finite(v.0) && finite(w.0) && force_finite(f, frozen))
                 })
                 .map(|(e, ..)| e)
                 .take(16)

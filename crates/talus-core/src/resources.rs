@@ -239,8 +239,8 @@ pub struct DeferredKick {
 /// whose end is not reported leaves them unsummed where the plan allows it
 /// ([`Self::may_leave`]); the next step that sums them, or
 /// [`Simulation::synchronize`](crate::schedule::Simulation::synchronize), brings them up
-/// to date from the contact forces, which stay stored with their contacts: the same
-/// sums in the same order, the same bits. In LAMMPS's chute the 912 frozen grains' share
+/// to date from the contact forces, which stay stored with their contacts (no system of
+/// a step changes them after its sums): the same sums in the same order, the same bits. In LAMMPS's chute the 912 frozen grains' share
 /// of the sums reads the whole contact table once more at every step.
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FrozenTotals {
@@ -250,8 +250,9 @@ pub struct FrozenTotals {
     /// reads the grains' `Force` or `Torque`, and a step may leave its kick pending.
     pub may_leave: bool,
     /// Set by the simulation before each step: whether this step may leave the frozen
-    /// grains' totals unsummed (a step that defers its kick and whose kinetic energies
-    /// are not due, in a plan that allows it).
+    /// grains' totals unsummed (a step run by
+    /// [`Simulation::step_before_another`](crate::schedule::Simulation::step_before_another)
+    /// whose kinetic energies are not due, in a plan that allows it).
     pub leave_this_step: bool,
     /// Set by the force sums when they left the frozen grains' totals unsummed: they are
     /// an earlier step's until the next step that sums them or

@@ -402,6 +402,20 @@ fn put(item: &impl Serialize, buf: &mut Vec<u8>, out: &mut impl Write) -> Result
 /// in postcard's encoding, streamed straight from the world (no copy of the state is
 /// held: `talus run` writes its last good state this way at every report).
 fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<(), String> {
+    // The grains' components hold the last step's end state only after a step that was
+    // not left for another, or after `Simulation::synchronize`.
+    debug_assert!(
+        !world
+            .get_resource::<talus_core::resources::DeferredKick>()
+            .is_some_and(|d| d.snapshot_holds_motion),
+        "a state saved while the snapshot holds the motion: synchronize first"
+    );
+    debug_assert!(
+        !world
+            .get_resource::<talus_core::resources::FrozenTotals>()
+            .is_some_and(|f| f.pending),
+        "a state saved with the frozen grains' totals left unsummed: synchronize first"
+    );
     let config = world.resource::<SimConfig>().clone();
     let clock = world.resource::<Clock>().clone();
     let materials: Vec<String> = world
