@@ -627,6 +627,8 @@ pub fn apply_contact_forces(
         &mut picked,
     );
     frozen_totals.pending = left;
+    // Counts, the worst overlap and the energies come summed per chunk from the force
+    // loop; the walls' loads from every contact with a wall, in table order.
     if !wall_force.is_empty() {
         for &(bodies, forces) in &tables {
             for (b, f) in bodies.iter().zip(forces) {
