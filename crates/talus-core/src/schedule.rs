@@ -186,8 +186,7 @@ impl SimBuilder {
         builder.declare_motion_free(&snapshot::gather_snapshot);
         builder.declare_motion_free(&integrate::second_kick_and_kinetic_energy);
         builder.declare_motion_free(&integrate::health_check);
-        // The integrators read the totals of the grains they move only; the health check
-        // looks for non-finite ones, which a frozen grain's contact gives its partner too.
+        // The integrators and the health check read the totals of the moving grains only.
         builder.declare_frozen_totals_unread(&integrate::kick_drift_translation);
         builder.declare_frozen_totals_unread(&integrate::first_kick_rotation);
         builder.declare_frozen_totals_unread(&integrate::second_kick_and_kinetic_energy);
