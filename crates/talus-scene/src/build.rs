@@ -1761,11 +1761,15 @@ fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), Sc
     Ok(())
 }
 
-/// Orders grains along a Z-order (Morton) curve through cells one largest diameter wide
-/// (LAMMPS sorts its atoms by bins in row order; on the 512,000-grain chute the two orders
-/// run within 3 % of each other, docs/performance-log.md, session 16): grains close in space are
-/// then close in memory, so the neighbour search, the contact loop and the force sums read
-/// and write nearby memory.
+/// Orders grains by cells one largest diameter wide, in rows: x fastest, then y, then z
+/// (LAMMPS's `atom_modify sort` order), so that grains close in space are close in memory and
+/// the neighbour search, the contact loop and the force sums read and write nearby memory.
+/// Rows rather than a Z-order curve (`docs/architecture.md`, "Grain order"): a block of
+/// consecutive grains is then one or two cells thin along z, the axis of gravity and of a
+/// flow's shear, so the spread of its grains' moves, which bounds the narrow phase's pair
+/// tests, is small (the chute runs 16–18 % fewer tests than in Z-order); and a grain's
+/// partners are never more than two layers of cells away in memory, where a Z-order curve
+/// sends a few per cent of them to the far end of the packing.
 /// A stable sort of a fixed key: the order is a function of the positions alone.
 fn sort_spatially(grains: &mut [GrainInit]) {
     let Some(cell) = grains
@@ -1776,23 +1780,25 @@ fn sort_spatially(grains: &mut [GrainInit]) {
     else {
         return;
     };
-    let low = grains
-        .iter()
-        .fold(DVec3::splat(f64::INFINITY), |m, g| m.min(g.position));
-    // Spreads the low 21 bits of a cell index to every third bit.
-    let spread = |x: u64| {
-        let mut x = x & 0x1f_ffff;
-        x = (x | x << 32) & 0x1f_0000_0000_ffff;
-        x = (x | x << 16) & 0x1f_0000_ff00_00ff;
-        x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
-        x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
-        (x | x << 2) & 0x1249_2492_4924_9249
+    let (low, high) = grains.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(low, high), g| (low.min(g.position), high.max(g.position)),
+    );
+    let cell_of = |p: DVec3| {
+        let c = ((p - low) / cell).floor();
+        [c.x as u64, c.y as u64, c.z as u64]
     };
-    let key = |g: &GrainInit| {
-        let c = ((g.position - low) / cell).floor();
-        spread(c.x as u64) | spread(c.y as u64) << 1 | spread(c.z as u64) << 2
-    };
-    grains.sort_by_cached_key(key);
+    let [top_x, top_y, _] = cell_of(high);
+    let (nx, ny) = (top_x.saturating_add(1), top_y.saturating_add(1));
+    // Saturating: a packing too sparse for 64 bits of cells (never a real one) is only
+    // sorted less well, never a panic.
+    grains.sort_by_cached_key(|g| {
+        let [x, y, z] = cell_of(g.position);
+        z.saturating_mul(ny)
+            .saturating_add(y)
+            .saturating_mul(nx)
+            .saturating_add(x)
+    });
 }
 
 impl Scene {
