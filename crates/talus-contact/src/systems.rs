@@ -806,6 +806,16 @@ fn sum_frozen_totals(
 /// table is in no spatial order), and a branch per side mispredicted on so many that this
 /// stage took as long on two threads as on one. On one thread every branch is predicted
 /// and picking would only add a pass. Either way the sums are taken in the same order.
+///
+/// Without `pick`, a range of at least [`LATE_START_GRAINS`] grains has its totals set to
+/// their weights as the scan of the contacts reaches them, [`START_LEAD`] grains ahead of the
+/// largest body of each block of [`START_BLOCK`] contacts, instead of in a pass of their own
+/// first: the contact table is in the order of its first bodies and a second body is at most
+/// two layers of cells further (`docs/architecture.md`, "Grain order"), so a total is set
+/// shortly before the contacts add to it, while its line is still in cache. A pass of its own
+/// over a large range writes every total out to memory and the additions read them back
+/// (13–18 % of this stage at 512,000 grains). The additions' order, hence every bit, is the
+/// same either way.
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn sum_range(
@@ -821,10 +831,18 @@ fn sum_range(
     let len = force.len();
     // The totals start from the weight m g: the gravity of `SimBuilder::gravity_in_force_sums`,
     // which then needs no pass of its own over the grains.
-    for (f, m) in force.iter_mut().zip(mass) {
-        f.0 = g * m.0;
+    let start = |force: &mut [Force], torque: &mut [Torque], from: usize, to: usize| {
+        for (f, m) in force[from..to].iter_mut().zip(&mass[from..to]) {
+            f.0 = g * m.0;
+        }
+        torque[from..to].fill(Torque(DVec3::ZERO));
+    };
+    // The totals `..started` are set.
+    let mut started = 0;
+    if pick || len < LATE_START_GRAINS {
+        start(force, torque, 0, len);
+        started = len;
     }
-    torque.fill(Torque(DVec3::ZERO));
     // Adds one side of a contact; `b_side` for the second body, whose force is opposite.
     let add = |force: &mut [Force],
                torque: &mut [Torque],
@@ -843,24 +861,43 @@ fn sum_range(
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
     if !pick {
+        // One past a body's offset in the range, 0 outside it.
+        let reach = |body: u32| {
+            let k = (body as usize).wrapping_sub(first);
+            if k < len { k + 1 } else { 0 }
+        };
         for &(bodies, forces) in tables {
-            for (row, (b, f)) in bodies.iter().zip(forces).enumerate() {
-                // The table is in the order of its first bodies, so the first sides' totals
-                // are read in order; the second bodies' are not, and miss a core's own
-                // cache: ask for them a few contacts ahead.
-                if let Some(ahead) = bodies.get(row + SUM_AHEAD) {
-                    let j = (ahead.b as usize).wrapping_sub(first);
-                    prefetch_item(force, j);
-                    prefetch_item(torque, j);
+            for (block, rows) in bodies.chunks(START_BLOCK).enumerate() {
+                if started < len {
+                    let needed = rows.iter().map(|b| reach(b.a).max(reach(b.b))).max();
+                    if let Some(needed) = needed.filter(|&n| n > started) {
+                        let to = (needed + START_LEAD).min(len);
+                        start(force, torque, started, to);
+                        started = to;
+                    }
                 }
-                if in_range(b.a) {
-                    add(force, torque, b, f, false);
-                }
-                if in_range(b.b) {
-                    add(force, torque, b, f, true);
+                let block_start = block * START_BLOCK;
+                for (row, b) in (block_start..).zip(rows) {
+                    // The table is in the order of its first bodies, so the first sides'
+                    // totals are read in order; the second bodies' are not, and miss a
+                    // core's own cache: ask for them a few contacts ahead.
+                    if let Some(ahead) = bodies.get(row + SUM_AHEAD) {
+                        let j = (ahead.b as usize).wrapping_sub(first);
+                        prefetch_item(force, j);
+                        prefetch_item(torque, j);
+                    }
+                    let f = &forces[row];
+                    if in_range(b.a) {
+                        add(force, torque, b, f, false);
+                    }
+                    if in_range(b.b) {
+                        add(force, torque, b, f, true);
+                    }
                 }
             }
         }
+        // Grains no contact touches.
+        start(force, torque, started, len);
         return;
     }
     // Two entries a contact at most, plus the one written past the last kept; blocks of
@@ -892,6 +929,20 @@ fn sum_range(
     }
 }
 
+/// The smallest range of grains whose totals [`sum_range`] sets as its scan reaches them
+/// (on one thread): on the chute, setting them late costs 3–11 % of the stage at 32,000
+/// grains (1.5 MB of totals, in the L3 either way) and saves 5–10 % at 128,000 and 13–18 %
+/// at 512,000 (`docs/performance-log.md`, session 32).
+pub const LATE_START_GRAINS: usize = 65_536;
+
+/// Contacts whose bodies [`sum_range`] takes together to find how far the totals must be
+/// set before adding them.
+const START_BLOCK: usize = 64;
+
+/// How many grains beyond the largest body of a block of contacts [`sum_range`] sets at
+/// once, so that a new stretch of totals is set once every few blocks, not at every one.
+const START_LEAD: usize = 1024;
+
 /// How many contacts (or picked sides) ahead [`sum_range`] asks for the totals it will add
 /// to.
 const SUM_AHEAD: usize = 16;
@@ -920,4 +971,115 @@ pub fn unbalanced_force_ratio(world: &mut World) -> Option<f64> {
         }
     }
     (n > 0 && m > 0 && contact > 0.0).then(|| (net / n as f64) / (contact / m as f64))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Numbers in [0, 1) from a 64-bit linear congruential generator: a fixed stream the
+    /// test needs no crate for.
+    struct Numbers(u64);
+
+    impl Numbers {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+
+        fn vector(&mut self) -> DVec3 {
+            DVec3::new(self.next() - 0.5, self.next() - 0.5, self.next() - 0.5)
+        }
+    }
+
+    /// The sums of one range, set late (one thread, a range past [`LATE_START_GRAINS`]) and
+    /// set first (the picking path of two threads), against their definition: each total
+    /// the grain's weight plus, in table order, the force (or its opposite) and torque of
+    /// every contact that touches it. Contacts mostly in the order of their first bodies,
+    /// their second bodies up to 3,000 grains further, every 40th row out of order (a
+    /// recycled row), some with a wall, bodies before and after the range, two tables.
+    #[test]
+    fn totals_set_as_the_scan_reaches_them_are_the_plain_sums() {
+        let first = 1_000;
+        let len = LATE_START_GRAINS + 5_000;
+        let grains = first + len + 3_000;
+        let mut numbers = Numbers(7);
+        let mut tables: Vec<(Vec<ContactBodies>, Vec<ContactForce>)> = vec![Default::default(); 2];
+        for a in 0..grains as u32 {
+            let table = &mut tables[(a % 7 == 0) as usize];
+            for _ in 0..(numbers.next() * 2.5) as usize {
+                let row = table.0.len();
+                let a = if row % 40 == 39 {
+                    (numbers.next() * grains as f64) as u32
+                } else {
+                    a
+                };
+                let b = if numbers.next() < 0.05 {
+                    WALL_BODY_BASE + 2
+                } else {
+                    a + 1 + (numbers.next() * 3_000.0) as u32
+                };
+                table.0.push(ContactBodies { a, b, layout: 1 });
+                table.1.push(ContactForce {
+                    force: numbers.vector(),
+                    torque_a: numbers.vector(),
+                    torque_b: numbers.vector(),
+                });
+            }
+        }
+        let mass: Vec<Mass> = (0..len).map(|_| Mass(0.5 + numbers.next())).collect();
+        let g = DVec3::new(0.44, 0.0, -0.9);
+        let mut force_expected: Vec<DVec3> = mass.iter().map(|m| g * m.0).collect();
+        let mut torque_expected = vec![DVec3::ZERO; len];
+        for (bodies, forces) in &tables {
+            for (b, f) in bodies.iter().zip(forces) {
+                let (i, j) = (b.a as usize, b.b as usize);
+                if (first..first + len).contains(&i) {
+                    force_expected[i - first] += f.force;
+                    torque_expected[i - first] += f.torque_a;
+                }
+                if (first..first + len).contains(&j) {
+                    force_expected[j - first] -= f.force;
+                    torque_expected[j - first] += f.torque_b;
+                }
+            }
+        }
+        let views: Vec<(&[ContactBodies], &[ContactForce])> = tables
+            .iter()
+            .map(|(b, f)| (b.as_slice(), f.as_slice()))
+            .collect();
+        for pick in [false, true] {
+            // Totals left from an earlier step: every one must be set again.
+            let mut force = vec![Force(DVec3::NAN); len];
+            let mut torque = vec![Torque(DVec3::NAN); len];
+            let mut picked = Vec::new();
+            sum_range(
+                &views,
+                pick,
+                first,
+                &mut force,
+                &mut torque,
+                &mass,
+                g,
+                &mut picked,
+            );
+            for k in 0..len {
+                assert_eq!(
+                    force[k].0.to_array().map(f64::to_bits),
+                    force_expected[k].to_array().map(f64::to_bits),
+                    "force total of grain {} (pick: {pick})",
+                    first + k
+                );
+                assert_eq!(
+                    torque[k].0.to_array().map(f64::to_bits),
+                    torque_expected[k].to_array().map(f64::to_bits),
+                    "torque total of grain {} (pick: {pick})",
+                    first + k
+                );
+            }
+        }
+    }
 }
