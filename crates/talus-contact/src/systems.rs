@@ -807,15 +807,16 @@ fn sum_frozen_totals(
 /// stage took as long on two threads as on one. On one thread every branch is predicted
 /// and picking would only add a pass. Either way the sums are taken in the same order.
 ///
-/// Without `pick`, a range of at least [`LATE_START_GRAINS`] grains has its totals set to
-/// their weights as the scan of the contacts reaches them, [`START_LEAD`] grains ahead of the
-/// largest body of each block of [`START_BLOCK`] contacts, instead of in a pass of their own
-/// first: the contact table is in the order of its first bodies and a second body is at most
-/// two layers of cells further (`docs/architecture.md`, "Grain order"), so a total is set
-/// shortly before the contacts add to it, while its line is still in cache. A pass of its own
-/// over a large range writes every total out to memory and the additions read them back
-/// (13–18 % of this stage at 512,000 grains). The additions' order, hence every bit, is the
-/// same either way.
+/// A range of at least [`LATE_START_GRAINS`] grains has its totals set to their weights as
+/// the scan of the contacts reaches them, [`START_LEAD`] grains ahead of the largest body of
+/// each block of [`START_BLOCK`] contacts (of each block of picked contacts with `pick`),
+/// instead of in a pass of their own first: the contact table is in the order of its first
+/// bodies and a second body is at most two layers of cells further (`docs/architecture.md`,
+/// "Grain order"), so a total is set shortly before the contacts add to it, while its line
+/// is still in cache. A pass of its own over a large range writes every total out to memory
+/// and the additions read them back
+/// (13–18 % of this stage at 512,000 grains on one thread, 10–16 % on two). The additions'
+/// order, hence every bit, is the same either way.
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn sum_range(
@@ -839,7 +840,7 @@ fn sum_range(
     };
     // The totals `..started` are set.
     let mut started = 0;
-    if pick || len < LATE_START_GRAINS {
+    if len < LATE_START_GRAINS {
         start(force, torque, 0, len);
         started = len;
     }
@@ -860,12 +861,12 @@ fn sum_range(
         }
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
+    // One past a body's offset in the range, 0 outside it.
+    let reach = |body: u32| {
+        let k = (body as usize).wrapping_sub(first);
+        if k < len { k + 1 } else { 0 }
+    };
     if !pick {
-        // One past a body's offset in the range, 0 outside it.
-        let reach = |body: u32| {
-            let k = (body as usize).wrapping_sub(first);
-            if k < len { k + 1 } else { 0 }
-        };
         for &(bodies, forces) in tables {
             for (block, rows) in bodies.chunks(START_BLOCK).enumerate() {
                 if started < len {
@@ -906,12 +907,20 @@ fn sum_range(
     for &(bodies, forces) in tables {
         for (bodies, forces) in bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK)) {
             let mut count = 0;
+            // One past the largest offset picked (0 for none).
+            let mut needed = 0;
             for (row, b) in bodies.iter().enumerate() {
                 let code = (row as u32) << 1;
                 picked[count] = code;
                 count += usize::from(in_range(b.a));
                 picked[count] = code | 1;
                 count += usize::from(in_range(b.b));
+                needed = needed.max(reach(b.a).max(reach(b.b)));
+            }
+            if needed > started {
+                let to = (needed + START_LEAD).min(len);
+                start(force, torque, started, to);
+                started = to;
             }
             for k in 0..count {
                 let code = picked[k];
@@ -927,10 +936,12 @@ fn sum_range(
             }
         }
     }
+    // Grains no contact touches.
+    start(force, torque, started, len);
 }
 
-/// The smallest range of grains whose totals [`sum_range`] sets as its scan reaches them
-/// (on one thread): on the chute, setting them late costs 3–11 % of the stage at 32,000
+/// The smallest range of grains whose totals [`sum_range`] sets as its scan reaches them:
+/// on the chute (one thread), setting them late costs 3–11 % of the stage at 32,000
 /// grains (1.5 MB of totals, in the L3 either way) and saves 5–10 % at 128,000 and 13–18 %
 /// at 512,000 (`docs/performance-log.md`, session 32).
 pub const LATE_START_GRAINS: usize = 65_536;
@@ -995,8 +1006,8 @@ mod tests {
         }
     }
 
-    /// The sums of one range, set late (one thread, a range past [`LATE_START_GRAINS`]) and
-    /// set first (the picking path of two threads), against their definition: each total
+    /// The sums of one range past [`LATE_START_GRAINS`], whose totals are set late, on one
+    /// thread's path and on the picking path of two, against their definition: each total
     /// the grain's weight plus, in table order, the force (or its opposite) and torque of
     /// every contact that touches it. Contacts mostly in the order of their first bodies,
     /// their second bodies up to 3,000 grains further, every 40th row out of order (a
