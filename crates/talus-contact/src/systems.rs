@@ -944,7 +944,7 @@ fn sum_range(
 /// on the chute (one thread), setting them late costs 3–11 % of the stage at 32,000
 /// grains (1.5 MB of totals, in the L3 either way) and saves 5–10 % at 128,000 and 13–18 %
 /// at 512,000 (`docs/performance-log.md`, session 32).
-pub const LATE_START_GRAINS: usize = 65_536;
+const LATE_START_GRAINS: usize = 65_536;
 
 /// Contacts whose bodies [`sum_range`] takes together to find how far the totals must be
 /// set before adding them.
