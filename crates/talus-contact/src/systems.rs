@@ -613,9 +613,9 @@ pub fn apply_contact_forces(
         .collect();
     let leave_frozen = frozen_totals.leave_this_step && clock.pass_dt != 0.0;
     let which = if leave_frozen {
-        TotalsOf::MovingGrains
+        TotalsOf::Moving
     } else {
-        TotalsOf::AllGrains
+        TotalsOf::All
     };
     let left = sum_grain_totals(
         &snapshot,
@@ -685,12 +685,16 @@ pub fn apply_contact_forces(
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum TotalsOf {
     /// Every grain's.
-    AllGrains,
+    All,
     /// Only those of the grains that move (not [`Frozen`]).
-    MovingGrains,
+    Moving,
     /// Only those of the frozen grains.
-    FrozenGrains,
+    Frozen,
 }
+
+/// One thread's range of [`sum_grain_totals`]: its first grain's dense index, and the
+/// range's force and torque totals and masses.
+type SumPart<'a> = (usize, &'a mut [Force], &'a mut [Torque], &'a [Mass]);
 
 /// Sets the force and torque totals of the grains `which` names from the contact tables
 /// (see [`sum_range`]); returns whether it left a table of frozen grains out.
@@ -698,8 +702,8 @@ enum TotalsOf {
 /// Each grain sums its contacts' forces in table order, whichever thread does it, so the
 /// totals are the same bit for bit on any number of threads: the grains' force and
 /// torque columns (in snapshot order) are split into one range per thread, and each
-/// range's thread zeroes its range, reads every contact's body indices (written by the
-/// force loop) and adds the forces of those that touch it. Each grain table is a share of
+/// range's thread sets its totals to the weights, reads every contact's body indices
+/// (written by the force loop) and adds the forces of those that touch it. Each grain table is a share of
 /// its own and each share reads every contact, so a table left out (the frozen base of a
 /// chute) spares a whole pass over the contacts.
 fn sum_grain_totals(
@@ -713,7 +717,7 @@ fn sum_grain_totals(
 ) -> bool {
     let n = snapshot.len();
     let range = n.div_ceil(rayon::current_num_threads()).max(1);
-    let mut parts: Vec<(usize, &mut [Force], &mut [Torque], &[Mass])> = Vec::new();
+    let mut parts: Vec<SumPart> = Vec::new();
     let mut offset = 0;
     let mut left_frozen = false;
     for (e, f, t, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
@@ -722,9 +726,9 @@ fn sum_grain_totals(
         // `Frozen` is a table component: a table's grains are all frozen or none is.
         let is_frozen = e.first().is_some_and(|&first| frozen.contains(first));
         let wanted = match which {
-            TotalsOf::AllGrains => true,
-            TotalsOf::MovingGrains => !is_frozen,
-            TotalsOf::FrozenGrains => is_frozen,
+            TotalsOf::All => true,
+            TotalsOf::Moving => !is_frozen,
+            TotalsOf::Frozen => is_frozen,
         };
         left_frozen |= is_frozen && !wanted;
         if wanted {
@@ -786,7 +790,7 @@ fn sum_frozen_totals(
         &tables,
         &mut grains,
         &frozen,
-        TotalsOf::FrozenGrains,
+        TotalsOf::Frozen,
         config.gravity,
         &mut picked,
     );
