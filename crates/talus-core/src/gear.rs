@@ -40,6 +40,24 @@ pub struct GearHistory {
     start: Vec<DVec3>,
 }
 
+impl GearHistory {
+    /// Follows a reordering of the moving grains (`before` and `after`: their entities in
+    /// query order), so that each grain keeps its own derivatives
+    /// ([`crate::grain_order::sort_grains`]). A history not yet started is left empty.
+    pub(crate) fn reorder(&mut self, before: &[Entity], after: &[Entity]) {
+        if self.position.len() != before.len() || before.len() != after.len() {
+            return;
+        }
+        let old_index: std::collections::HashMap<Entity, usize> =
+            before.iter().enumerate().map(|(k, e)| (*e, k)).collect();
+        let order: Vec<usize> = after.iter().map(|e| old_index[e]).collect();
+        self.position = order.iter().map(|&k| self.position[k]).collect();
+        self.spin = order.iter().map(|&k| self.spin[k]).collect();
+        // `start` is refilled by each prediction before the correction reads it.
+        self.start.clear();
+    }
+}
+
 /// Predictor: Taylor-series step of positions, velocities and spins (and their scaled
 /// derivatives). Starts the derivatives from the current forces on first use.
 #[allow(clippy::type_complexity)]

@@ -7,6 +7,7 @@
 pub mod components;
 pub mod energy;
 pub mod gear;
+pub mod grain_order;
 pub mod integrate;
 pub mod lanes;
 pub mod periodic;

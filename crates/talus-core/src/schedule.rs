@@ -126,6 +126,8 @@ pub struct SimBuilder {
     /// The system types declared not to read the frozen grains' force and torque totals
     /// ([`Self::declare_frozen_totals_unread`]).
     frozen_totals_unread: Vec<std::any::TypeId>,
+    /// Steps between two re-sorts of the grains in memory ([`Self::sort_grains_every`]).
+    sort_every: Option<std::num::NonZeroU64>,
 }
 
 impl SimBuilder {
@@ -178,6 +180,7 @@ impl SimBuilder {
             reads_between_steps: false,
             motion_free: Vec::new(),
             frozen_totals_unread: Vec::new(),
+            sort_every: None,
         };
         // The core's own systems that read or change the grains' motion know where it is
         // (`DeferredKick::snapshot_holds_motion`).
@@ -461,6 +464,17 @@ impl SimBuilder {
         read
     }
 
+    /// Re-sorts the grains in memory by position ([`crate::grain_order::sort_grains`]) before
+    /// the first step and then every `steps` steps (LAMMPS's `atom_modify sort`), so that a
+    /// packing whose grains move far keeps its neighbours near in memory. Between two
+    /// steps, with the grains' state written back first: no system of the step sees it.
+    pub fn sort_grains_every(&mut self, steps: std::num::NonZeroU64) {
+        self.sort_every = Some(steps);
+        self.note(format!(
+            "grains re-sorted in memory (rows of cells) before the first step and every {steps} steps"
+        ));
+    }
+
     /// Finishes the simulation. Initial forces are evaluated on the first step call.
     pub fn build(mut self) -> Simulation {
         if self.config().gravity != glam::DVec3::ZERO && !self.gravity_in_sums {
@@ -486,6 +500,8 @@ impl SimBuilder {
             plan: self.plan,
             primed: false,
             can_defer_kick,
+            sort_every: self.sort_every,
+            sorted_at: None,
         }
     }
 }
@@ -527,6 +543,10 @@ pub struct Simulation {
     /// a step followed by another may leave its second kick to the next
     /// ([`DeferredKick`](crate::resources::DeferredKick)).
     can_defer_kick: bool,
+    /// Steps between two re-sorts of the grains ([`SimBuilder::sort_grains_every`]).
+    sort_every: Option<std::num::NonZeroU64>,
+    /// The step count at the last re-sort, so that a step count is sorted at most once.
+    sorted_at: Option<u64>,
 }
 
 impl Simulation {
@@ -544,6 +564,8 @@ impl Simulation {
         if self.primed {
             return Ok(());
         }
+        // The initial contacts are made in the sorted order.
+        self.sort_grains_if_due();
         self.primed = true;
         self.world.resource_mut::<Clock>().pass_dt = 0.0;
         self.world
@@ -590,7 +612,32 @@ impl Simulation {
         }
     }
 
+    /// Puts the grains in the order of their cells
+    /// ([`crate::grain_order::sort_grains`]) after writing back what the last step left
+    /// ([`Self::synchronize`]). Returns the number of grains moved (0 when every table was
+    /// in order). Changes no grain's state, contact or history; the order of the force
+    /// sums over a grain's contacts, and so the last bits of later steps, may change with
+    /// the order of contacts the narrow phase makes.
+    pub fn sort_grains(&mut self) -> usize {
+        self.synchronize();
+        crate::grain_order::sort_grains(&mut self.world)
+    }
+
+    /// Re-sorts the grains when the step count is a multiple of the interval
+    /// ([`SimBuilder::sort_grains_every`]) and they were not sorted at this count yet.
+    fn sort_grains_if_due(&mut self) {
+        let Some(every) = self.sort_every else {
+            return;
+        };
+        let step = self.world.resource::<Clock>().step;
+        if step.is_multiple_of(every.get()) && self.sorted_at != Some(step) {
+            self.sorted_at = Some(step);
+            self.sort_grains();
+        }
+    }
+
     fn step_deferring(&mut self, defer: bool) -> Result<(), BlowUp> {
+        self.sort_grains_if_due();
         self.prime()?;
         // A step that will kick its grains to its end state works on their components:
         // the snapshot gives back the motion it holds first.
