@@ -217,3 +217,16 @@ fn grains_overlapping_through_a_periodic_seam() {
         .build(&talus::registry())
         .unwrap();
 }
+
+#[test]
+fn sorting_the_grains_every_zero_steps() {
+    let text = GOOD.replace("steps: 10,", "steps: 10,\n    sort_grains_every: 0,");
+    let e = error_of(&text);
+    assert_eq!(
+        (e.line, e.column),
+        line_col_of(&text, "0,\n    plugins"),
+        "{e}"
+    );
+    assert_eq!(e.field, "sort_grains_every", "{e}");
+    assert!(e.expected.contains("positive number of steps"), "{e}");
+}

@@ -10,6 +10,7 @@ use talus_collision::{CellGrid, CollisionPlugin};
 use talus_contact::{
     ContactPlugin, LawDescriptor, LawRegistry, PairAssignment, ParamValues, TimeScale, check_params,
 };
+use talus_core::grain_order::RowsOfCells;
 use talus_core::prelude::*;
 use talus_stress::{CoarseGrainingPlugin, FieldSpec, RegionShape, RegionSpec, StressPlugin};
 
@@ -290,6 +291,13 @@ impl Scene {
         {
             return Err(cx.err("settle_kinetic_energy", "a positive energy in joules"));
         }
+        let sort_grains_every = match f.sort_grains_every {
+            None => None,
+            Some(n) => Some(
+                std::num::NonZeroU64::new(n)
+                    .ok_or_else(|| cx.err("sort_grains_every", "a positive number of steps"))?,
+            ),
+        };
         if !positive(f.output.recording_interval) {
             return Err(cx.err(
                 "output.recording_interval",
@@ -775,7 +783,13 @@ impl Scene {
             let mat = material_id(material, &field("material"))?;
             let made = generate(g, k, mat, two_d)
                 .map_err(|(sub, expected)| cx.err(&field(&sub), expected))?;
+            let first = grains.len();
             grains.extend(made);
+            // Drawn at random, neighbours in space would lie anywhere in memory; a
+            // lattice is made in rows already, and a list keeps the order it was given.
+            if matches!(g, GrainSource::Random { .. }) {
+                sort_spatially(&mut grains[first..]);
+            }
         }
         // Sequential deposition: its first batch is part of the initial grains (a
         // resumed run has its batches in the state already).
@@ -833,6 +847,7 @@ impl Scene {
                             expected,
                         )
                     })?;
+                    let first = grains.len();
                     grains.extend(batch.into_iter().map(|(p, r, _)| GrainInit {
                         position: p,
                         radius: r,
@@ -844,6 +859,7 @@ impl Scene {
                         frozen: false,
                         saved: None,
                     }));
+                    sort_spatially(&mut grains[first..]);
                     crate::packing::DepositionProgress {
                         batches_inserted: 1,
                     }
@@ -1138,6 +1154,9 @@ impl Scene {
             rotation,
         });
         builder.world.insert_resource(Materials(materials));
+        if let Some(every) = sort_grains_every {
+            builder.sort_grains_every(every);
+        }
         // Only when off: no resource means booked, and a default run's world (whose
         // resources are entities in bevy_ecs 0.20) stays as it was.
         if !f.output.energy_ledger {
@@ -1762,43 +1781,14 @@ fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), Sc
 }
 
 /// Orders grains by cells one largest diameter wide, in rows: x fastest, then y, then z
-/// (LAMMPS's `atom_modify sort` order), so that grains close in space are close in memory and
-/// the neighbour search, the contact loop and the force sums read and write nearby memory.
-/// Rows rather than a Z-order curve (`docs/architecture.md`, "Grain order"): a block of
-/// consecutive grains is then one or two cells thin along z, the axis of gravity and of a
-/// flow's shear, so the spread of its grains' moves, which bounds the narrow phase's pair
-/// tests, is small (the chute runs 16–18 % fewer tests than in Z-order); and a grain's
-/// partners are never more than two layers of cells away in memory, where a Z-order curve
-/// sends a few per cent of them to the far end of the packing.
-/// A stable sort of a fixed key: the order is a function of the positions alone.
+/// ([`RowsOfCells`], LAMMPS's `atom_modify sort` order), so that grains close in space are
+/// close in memory and the neighbour search, the contact loop and the force sums read and
+/// write nearby memory (`docs/architecture.md`, "Grain order"). A stable sort of a fixed
+/// key: the order is a function of the positions alone.
 fn sort_spatially(grains: &mut [GrainInit]) {
-    let Some(cell) = grains
-        .iter()
-        .map(|g| 2.0 * g.radius)
-        .reduce(f64::max)
-        .filter(|d| *d > 0.0)
-    else {
-        return;
-    };
-    let (low, high) = grains.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(low, high), g| (low.min(g.position), high.max(g.position)),
-    );
-    let cell_of = |p: DVec3| {
-        let c = ((p - low) / cell).floor();
-        [c.x as u64, c.y as u64, c.z as u64]
-    };
-    let [top_x, top_y, _] = cell_of(high);
-    let (nx, ny) = (top_x.saturating_add(1), top_y.saturating_add(1));
-    // Saturating: a packing too sparse for 64 bits of cells (never a real one) is only
-    // sorted less well, never a panic.
-    grains.sort_by_cached_key(|g| {
-        let [x, y, z] = cell_of(g.position);
-        z.saturating_mul(ny)
-            .saturating_add(y)
-            .saturating_mul(nx)
-            .saturating_add(x)
-    });
+    if let Some(rows) = RowsOfCells::over(grains.iter().map(|g| (g.position, g.radius))) {
+        grains.sort_by_cached_key(|g| rows.key(g.position));
+    }
 }
 
 impl Scene {

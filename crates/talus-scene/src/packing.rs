@@ -8,6 +8,7 @@ use bevy_ecs::prelude::*;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use talus_contact::{Contact, ContactForce, ContactGeometry, ContactKind, unbalanced_force_ratio};
+use talus_core::grain_order::RowsOfCells;
 use talus_core::prelude::*;
 use talus_core::resources::StopRequest;
 
@@ -90,7 +91,11 @@ pub fn deposition(world: &mut World) {
         two_d,
         &existing,
     ) {
-        Ok(batch) => {
+        Ok(mut batch) => {
+            // In rows of cells, not in the order drawn, as a `Random` source's grains.
+            if let Some(rows) = RowsOfCells::over(batch.iter().map(|(p, r, _)| (*p, *r))) {
+                batch.sort_by_cached_key(|(p, ..)| rows.key(*p));
+            }
             world.spawn_batch(
                 batch
                     .into_iter()

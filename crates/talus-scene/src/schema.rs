@@ -78,6 +78,14 @@ pub struct SceneFile {
     /// Stop early once the mean kinetic energy per grain falls below this, J.
     #[serde(default)]
     pub settle_kinetic_energy: Option<f64>,
+    /// Re-sort the grains in memory by position (rows of cells one largest diameter wide)
+    /// before the first step and then every this many steps, as LAMMPS's `atom_modify
+    /// sort` does: grains a pour or a mixer carries far from where they started keep
+    /// their neighbours near in memory. No physics changes (the order of the force sums,
+    /// and so the last bits, may). Default: none (a `LammpsData` source is sorted as it is
+    /// read; grains keep the order they were made in).
+    #[serde(default)]
+    pub sort_grains_every: Option<u64>,
     /// What to write.
     #[serde(default)]
     pub output: OutputSpec,
