@@ -1,6 +1,7 @@
 //! Contact history survives a reordering of the grains: when the grains' order in memory
-//! changes (here by moving half of them through another table and back, which is what
-//! any change of a grain's component set does), the narrow phase re-keys its contact
+//! changes (by moving half of them through another table and back, which is what any
+//! change of a grain's component set does, or by the re-sort in rows of cells a scene may
+//! ask for, `Simulation::sort_grains`), the narrow phase re-keys its contact
 //! index by entity, every persistent contact keeps its entity and its tangential spring,
 //! and the step that follows is the same, bit for bit, as without the reordering. (The step
 //! taken is not one at which the narrow phase sorts the contact tables, which moves
@@ -56,11 +57,23 @@ fn grain_bits(world: &mut World) -> BTreeMap<u64, [u64; 9]> {
         .collect()
 }
 
-/// Runs the scene's steps, optionally reorders the grains, then takes one more step.
-/// Returns the contacts before and after that step, the grain states after it, and the
-/// snapshot's grain order before and after it.
+/// How the grains are reordered before the last step.
+#[derive(Clone, Copy, PartialEq)]
+enum Reorder {
+    /// Not at all.
+    No,
+    /// Every second grain through another table and back (to the table's end).
+    HalfMoved,
+    /// By `Simulation::sort_grains` (the scene's grains are in the order drawn).
+    Sorted,
+}
+
+/// Runs the scene's steps (with the Gear integrator if `gear`), reorders the grains as
+/// asked, then takes one more step. Returns the contacts before and after that step, the
+/// grain states after it, and the snapshot's grain order before and after it.
 fn run(
-    reorder: bool,
+    reorder: Reorder,
+    gear: bool,
 ) -> (
     Springs,
     Springs,
@@ -68,7 +81,11 @@ fn run(
     Vec<Entity>,
     Vec<Entity>,
 ) {
-    let (mut sim, steps) = common::build(&common::settling_box_scene("reorder", 30000));
+    let mut scene = common::settling_box_scene("reorder", 30000);
+    if gear {
+        scene = scene.replace("    steps:", "    integrator: Gear,\n    steps:");
+    }
+    let (mut sim, steps) = common::build(&scene);
     assert_ne!(
         (steps + 1) % talus::collision::narrow::CONTACT_SORT_INTERVAL,
         0,
@@ -79,7 +96,7 @@ fn run(
     }
     let before = springs(&mut sim.world);
     let order_before = sim.world.resource::<GrainSnapshot>().entity.clone();
-    if reorder {
+    if reorder == Reorder::HalfMoved {
         let mut q = sim.world.query_filtered::<Entity, With<Grain>>();
         let grains: Vec<Entity> = q.iter(&sim.world).collect();
         for &e in grains.iter().step_by(2) {
@@ -88,6 +105,36 @@ fn run(
         for &e in grains.iter().step_by(2) {
             sim.world.entity_mut(e).remove::<Moved>();
         }
+    }
+    if reorder == Reorder::Sorted {
+        let moved = sim.sort_grains();
+        assert!(moved > 0, "the sort moved grains");
+        // The definition of the order: keys of rows of cells one largest diameter wide
+        // (x fastest, then y, then z) over all grains, non-decreasing in the table.
+        let mut q = sim
+            .world
+            .query_filtered::<(&Position, &talus::core::components::Radius), With<Grain>>();
+        let grains: Vec<(glam::DVec3, f64)> = q.iter(&sim.world).map(|(p, r)| (p.0, r.0)).collect();
+        let cell = grains.iter().map(|g| 2.0 * g.1).fold(0.0, f64::max);
+        let low = grains
+            .iter()
+            .fold(glam::DVec3::INFINITY, |low, g| low.min(g.0));
+        let high = grains
+            .iter()
+            .fold(glam::DVec3::NEG_INFINITY, |high, g| high.max(g.0));
+        let cells = ((high - low) / cell).floor() + 1.0;
+        let keys: Vec<f64> = grains
+            .iter()
+            .map(|(p, _)| {
+                let c = ((*p - low) / cell).floor();
+                (c.z * cells.y + c.y) * cells.x + c.x
+            })
+            .collect();
+        assert!(
+            keys.windows(2).all(|k| k[0] <= k[1]),
+            "the grains are in rows of cells: {keys:?}"
+        );
+        assert_eq!(sim.sort_grains(), 0, "a sorted packing is left as it is");
     }
     sim.step().unwrap();
     let after = springs(&mut sim.world);
@@ -98,8 +145,24 @@ fn run(
 
 #[test]
 fn reordering_the_grains_keeps_every_contact_and_its_spring() {
-    let (before, after_plain, grains_plain, order, order_plain) = run(false);
-    let (before_again, after_reordered, grains_reordered, _, order_reordered) = run(true);
+    check_reordering(Reorder::HalfMoved, false);
+}
+
+#[test]
+fn sorting_the_grains_keeps_every_contact_and_its_spring() {
+    check_reordering(Reorder::Sorted, false);
+}
+
+/// The Gear integrator keeps derivatives per grain in grain order: the sort carries them
+/// with their grains, so the step after it is the same, bit for bit.
+#[test]
+fn sorting_the_grains_keeps_the_gear_integrators_derivatives() {
+    check_reordering(Reorder::Sorted, true);
+}
+
+fn check_reordering(reorder: Reorder, gear: bool) {
+    let (before, after_plain, grains_plain, order, order_plain) = run(Reorder::No, gear);
+    let (before_again, after_reordered, grains_reordered, _, order_reordered) = run(reorder, gear);
     assert_eq!(before, before_again, "the runs agree up to the reordering");
     assert_eq!(
         order, order_plain,

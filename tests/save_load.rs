@@ -137,6 +137,35 @@ fn a_resumed_periodic_rolling_gear_run_is_bit_identical() {
     );
 }
 
+/// A run that re-sorts its grains in memory every 500 steps (`sort_grains_every`) resumed
+/// at a step where a sort is due: the resumed run sorts the restored grains as the
+/// uninterrupted one sorted them (the order is a function of the positions and the order
+/// before, both saved), and Gear's derivatives follow their grains through every sort.
+#[test]
+fn a_resumed_run_that_resorts_its_grains_is_bit_identical() {
+    let scene = |steps: u64| {
+        periodic_rolling_gear(steps).replace(
+            "    integrator: Gear,",
+            "    integrator: Gear,\n    sort_grains_every: 500,",
+        )
+    };
+    assert!(scene(10).contains("sort_grains_every: 500"));
+    let (whole, resumed, saved) = interrupted_and_not(scene, 1500, 3000);
+    assert!(saved.gear.is_some(), "Gear's derivatives are saved");
+    assert!(
+        whole == resumed,
+        "resumed run differs from the uninterrupted one"
+    );
+    // The sorts did reorder the grains: the run without them ends in another order.
+    let mut unsorted = build(&periodic_rolling_gear(3000), None);
+    unsorted.run_steps(3000).unwrap();
+    assert_ne!(
+        whole,
+        fingerprint(&mut unsorted),
+        "the sorts changed the grains' order"
+    );
+}
+
 /// The comparison can fail: forgetting the contact histories (tangential springs) at the
 /// split changes the continued run.
 #[test]
