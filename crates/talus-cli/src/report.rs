@@ -175,6 +175,13 @@ pub struct WallClock {
     pub stages: BTreeMap<String, f64>,
     /// Grain-steps per second of the time steps: grains × steps / `stepping`.
     pub grain_steps_per_second: f64,
+    /// Re-sorts of the grains in memory between the time steps (`sort_grains_every`; the
+    /// one before the first step is part of `priming`).
+    #[serde(default)]
+    pub grain_sorts: u64,
+    /// Seconds those re-sorts took, part of `stepping` and of no stage.
+    #[serde(default)]
+    pub grain_sorting: f64,
 }
 
 /// A blow-up as reported.

@@ -334,6 +334,8 @@ pub fn run_scene(
             grain_steps_per_second: built.grain_count as f64
                 * steps_run.saturating_sub(first_step) as f64
                 / stepping.max(1e-12),
+            grain_sorts: timings.grain_sorts,
+            grain_sorting: timings.grain_sort_seconds,
         },
         blow_up: None,
     };

@@ -115,6 +115,11 @@ pub struct StageTimings {
     /// Accumulated seconds per stage, in stage order.
     pub seconds: Vec<(crate::schedule::Stage, f64)>,
     pub(crate) last_mark: Option<(crate::schedule::Stage, std::time::Instant)>,
+    /// Re-sorts of the grains in memory between the steps
+    /// ([`SimBuilder::sort_grains_every`](crate::schedule::SimBuilder::sort_grains_every)).
+    pub grain_sorts: u64,
+    /// Seconds those re-sorts took (outside every stage).
+    pub grain_sort_seconds: f64,
 }
 
 impl StageTimings {
@@ -127,9 +132,12 @@ impl StageTimings {
             .unwrap_or(0.0)
     }
 
-    /// Forgets the seconds accumulated so far (a stage being timed goes on being timed).
+    /// Forgets the seconds (and re-sorts) accumulated so far (a stage being timed goes on
+    /// being timed).
     pub fn clear(&mut self) {
         self.seconds.clear();
+        self.grain_sorts = 0;
+        self.grain_sort_seconds = 0.0;
     }
 }
 

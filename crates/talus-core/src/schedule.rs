@@ -632,7 +632,11 @@ impl Simulation {
         let step = self.world.resource::<Clock>().step;
         if step.is_multiple_of(every.get()) && self.sorted_at != Some(step) {
             self.sorted_at = Some(step);
+            let start = Instant::now();
             self.sort_grains();
+            let mut timings = self.world.resource_mut::<StageTimings>();
+            timings.grain_sorts += 1;
+            timings.grain_sort_seconds += start.elapsed().as_secs_f64();
         }
     }
 
