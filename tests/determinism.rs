@@ -48,6 +48,23 @@ fn same_scene_twice_gives_bit_identical_reports() {
     assert_eq!(bits(&a), bits(&b));
 }
 
+/// Runs `scene` on `threads` threads with its output in `out`; returns its report.
+fn report_on(scene: &std::path::Path, out: &std::path::Path, threads: usize) -> talus::cli::Report {
+    let options = RunOptions {
+        out: Some(out.to_path_buf()),
+        quiet: true,
+        progress: false,
+        ..Default::default()
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| run_scene(scene, &talus::registry(), &options))
+        .unwrap()
+        .report
+}
+
 /// The same scene on 1, 2 and 3 threads gives bit-identical reports: every parallel loop
 /// splits its work into chunks fixed by the state (grains, contacts) or sums each grain's
 /// contacts in a fixed order whichever thread does it, never by the number of threads.
@@ -57,20 +74,7 @@ fn the_thread_count_does_not_change_the_results() {
     let scene = dir.join("det.ron");
     std::fs::write(&scene, SCENE).unwrap();
     let run = |threads: usize| {
-        let options = RunOptions {
-            out: Some(dir.join(format!("threads-{threads}"))),
-            quiet: true,
-            progress: false,
-            ..Default::default()
-        };
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let mut report = pool
-            .install(|| run_scene(&scene, &talus::registry(), &options))
-            .unwrap()
-            .report;
+        let mut report = report_on(&scene, &dir.join(format!("threads-{threads}")), threads);
         report.wall_clock = Default::default();
         serde_json::to_string(&report).unwrap()
     };
@@ -95,20 +99,7 @@ fn runs_that_resort_their_grains_stay_deterministic() {
     assert!(text.contains("sort_grains_every: 700"));
     std::fs::write(&scene, text).unwrap();
     let run = |threads: usize, name: &str| {
-        let options = RunOptions {
-            out: Some(dir.join(name)),
-            quiet: true,
-            progress: false,
-            ..Default::default()
-        };
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let mut report = pool
-            .install(|| run_scene(&scene, &talus::registry(), &options))
-            .unwrap()
-            .report;
+        let mut report = report_on(&scene, &dir.join(name), threads);
         assert_eq!(report.wall_clock.grain_sorts, 4);
         assert!(report.wall_clock.grain_sorting > 0.0);
         report.wall_clock = Default::default();
