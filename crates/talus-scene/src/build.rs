@@ -291,13 +291,13 @@ impl Scene {
         {
             return Err(cx.err("settle_kinetic_energy", "a positive energy in joules"));
         }
-        let sort_grains_every = match f.sort_grains_every {
-            None => None,
-            Some(n) => Some(
+        let sort_grains_every = f
+            .sort_grains_every
+            .map(|n| {
                 std::num::NonZeroU64::new(n)
-                    .ok_or_else(|| cx.err("sort_grains_every", "a positive number of steps"))?,
-            ),
-        };
+                    .ok_or_else(|| cx.err("sort_grains_every", "a positive number of steps"))
+            })
+            .transpose()?;
         if !positive(f.output.recording_interval) {
             return Err(cx.err(
                 "output.recording_interval",
