@@ -24,6 +24,16 @@ struct Moved;
 /// Each contact by its pair: its entity and its tangential spring, bit for bit.
 type Springs = BTreeMap<(u64, u64), (u64, [u64; 3])>;
 
+/// What [`run`] returns: the contacts before and after the last step, the grain states
+/// after it (bits, by id), and the snapshot's grain order before and after it.
+type RunResult = (
+    Springs,
+    Springs,
+    BTreeMap<u64, [u64; 9]>,
+    Vec<Entity>,
+    Vec<Entity>,
+);
+
 fn springs(world: &mut World) -> Springs {
     let mut q = world.query::<(Entity, &Contact, &LawState<TangentialSpring>)>();
     q.iter(world)
@@ -71,16 +81,7 @@ enum Reorder {
 /// Runs the scene's steps (with the Gear integrator if `gear`), reorders the grains as
 /// asked, then takes one more step. Returns the contacts before and after that step, the
 /// grain states after it, and the snapshot's grain order before and after it.
-fn run(
-    reorder: Reorder,
-    gear: bool,
-) -> (
-    Springs,
-    Springs,
-    BTreeMap<u64, [u64; 9]>,
-    Vec<Entity>,
-    Vec<Entity>,
-) {
+fn run(reorder: Reorder, gear: bool) -> RunResult {
     let mut scene = common::settling_box_scene("reorder", 30000);
     if gear {
         scene = scene.replace("    steps:", "    integrator: Gear,\n    steps:");

@@ -377,12 +377,16 @@ struct ShearAverage {
     samples: usize,
 }
 
+/// One stress sample of [`sheared_stress`]: pressure, shear stress σ_xy, inertial number and
+/// solid fraction.
+type Row = (f64, f64, f64, f64);
+
 /// Runs a sheared scene and averages the domain stress samples taken after the fraction
 /// `skip` of the run (the transient).
 fn sheared_stress(text: &str, skip: f64) -> ShearAverage {
     let (mut sim, steps) = common::build(text);
     let mut taken = 0;
-    let mut rows: Vec<(f64, f64, f64, f64)> = Vec::new();
+    let mut rows: Vec<Row> = Vec::new();
     for step in 1..=steps {
         sim.step().unwrap();
         let record = sim.world.resource::<talus_stress::StressRecord>();
@@ -407,9 +411,7 @@ fn sheared_stress(text: &str, skip: f64) -> ShearAverage {
     }
     let n = rows.len();
     assert!(n >= 12, "{n} samples");
-    let sum = |f: &dyn Fn(&(f64, f64, f64, f64)) -> f64, part: &[(f64, f64, f64, f64)]| {
-        part.iter().map(f).sum::<f64>()
-    };
+    let sum = |f: &dyn Fn(&Row) -> f64, part: &[Row]| part.iter().map(f).sum::<f64>();
     let blocks = 6;
     let block_mu: Vec<f64> = (0..blocks)
         .map(|b| {

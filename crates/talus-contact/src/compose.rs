@@ -361,8 +361,12 @@ impl<const K: u8> SubModel for Absent<K> {
 /// normal → damping → cohesion → tangential → rolling → twisting (cohesion adds to the
 /// normal force before the friction cap reads it).
 pub struct Composed<N, D, T, R = NoRolling, W = NoTwisting, C = NoCohesion>(
-    PhantomData<fn() -> (N, D, T, R, W, C)>,
+    PhantomData<Parts<N, D, T, R, W, C>>,
 );
+
+/// The six parts of a composed law as a type marker (a function type: the law holds no part
+/// and is `Send` and `Sync` whatever they are).
+type Parts<N, D, T, R, W, C> = fn() -> (N, D, T, R, W, C);
 
 /// Per-contact history of a composed law: one field per part.
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -645,7 +649,7 @@ pub struct ComposedLaw<N, D, T, R = NoRolling, W = NoTwisting, C = NoCohesion> {
     label: &'static str,
     summary: &'static str,
     params: Vec<ParamSpec>,
-    _parts: PhantomData<fn() -> (N, D, T, R, W, C)>,
+    _parts: PhantomData<Parts<N, D, T, R, W, C>>,
 }
 
 impl<N: SubModel, D: SubModel, T: SubModel, R: SubModel, W: SubModel, C: SubModel>

@@ -317,6 +317,7 @@ struct Extent {
 }
 
 /// Sets the timelines and logs the view coordinates (once), grains, force chains and walls.
+#[allow(clippy::too_many_arguments)]
 fn log_frame(
     rec: &rerun::RecordingStream,
     s: &mut ExportState,

@@ -124,7 +124,7 @@ fn recording_holds_every_grain_and_one_strip_per_contact() {
     for _ in 0..200 {
         sim.step().expect("no blow-up");
         let step = sim.step_count();
-        if step % every == 0 {
+        if step.is_multiple_of(every) {
             let n = contact_count(&mut sim.world);
             assert_eq!(n, sim.world.resource::<EnergySnapshot>().contacts);
             expected.push((step, n));

@@ -71,6 +71,8 @@ fn resolve_strain_drives(
             ));
         }
         let gap = (me.point - other.point).dot(other.normal);
+        // Negated, so that a NaN gap is refused too.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(gap > 0.0) {
             return Err(cx.err(
                 &field,
@@ -497,7 +499,10 @@ impl Scene {
                     let mat = material_id(material, &field("material"))?;
                     let (lo, hi) = (vec3(*min), vec3(*max));
                     let axes = if two_d { 2 } else { 3 };
-                    if (0..axes).any(|d| !(lo[d] < hi[d])) || !lo.is_finite() || !hi.is_finite() {
+                    // Negated, so that a NaN bound is refused too.
+                    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+                    let empty = (0..axes).any(|d| !(lo[d] < hi[d]));
+                    if empty || !lo.is_finite() || !hi.is_finite() {
                         return Err(cx.err(
                             &field("max"),
                             "every component of `max` above that of `min`",
@@ -1537,7 +1542,7 @@ fn check_contact(
             format!("a registered contact law: {}", registry.names().join(", ")),
         ));
     }
-    if !plugins.iter().any(|p| *p == c.law) {
+    if !plugins.contains(&c.law) {
         return Err(cx.err(
             &format!("{field}.law"),
             format!("a law listed in `plugins` (add \"{}\" there)", c.law),
@@ -1766,6 +1771,8 @@ fn check_radius(cx: &Ctx, radius: &RadiusSpec, field: &str) -> Result<(), SceneE
     }
 }
 
+// Negated comparisons, so that a NaN bound is refused too.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 fn check_region(cx: &Ctx, r: &Region, field: &str, two_d: bool) -> Result<(), SceneError> {
     let axes = if two_d { 2 } else { 3 };
     if !vec3(r.min).is_finite()

@@ -4,12 +4,15 @@
 //! A structural scan only: it follows brackets, field names, strings and comments,
 //! and records where each value starts. It never judges validity (ron does that).
 
+/// A bracketed group: its path, and the (line, column) of its opener and of its closer.
+type Group = (String, (usize, usize), (usize, usize));
+
 /// Positions of the values of a RON text, by field path.
 #[derive(Clone, Debug, Default)]
 pub struct Locator {
     entries: Vec<(String, usize, usize)>,
     /// Bracketed groups: path, start (line, column), end (line, column) of the closer.
-    groups: Vec<(String, (usize, usize), (usize, usize))>,
+    groups: Vec<Group>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,11 +125,13 @@ fn tokenize(src: &str) -> Vec<Token> {
             });
         } else {
             let mut text = String::new();
-            while i < chars.len()
-                && !chars[i].is_whitespace()
-                && !"()[]{},:\"'".contains(chars[i])
-                && !(chars[i] == '/' && matches!(chars.get(i + 1), Some('/') | Some('*')))
-            {
+            // A bare word runs to whitespace, punctuation or a comment's opener.
+            let ends_word = |i: usize| {
+                chars[i].is_whitespace()
+                    || "()[]{},:\"'".contains(chars[i])
+                    || (chars[i] == '/' && matches!(chars.get(i + 1), Some('/') | Some('*')))
+            };
+            while i < chars.len() && !ends_word(i) {
                 text.push(chars[i]);
                 {
                     let ch = chars[i];
@@ -152,7 +157,7 @@ struct Scanner {
     toks: Vec<Token>,
     at: usize,
     entries: Vec<(String, usize, usize)>,
-    groups: Vec<(String, (usize, usize), (usize, usize))>,
+    groups: Vec<Group>,
 }
 
 impl Scanner {

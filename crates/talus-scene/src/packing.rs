@@ -54,7 +54,7 @@ pub struct Deposition {
 pub fn deposition(world: &mut World) {
     let step = world.resource::<Clock>().step;
     let check_every = world.resource::<Deposition>().check_every;
-    if step == 0 || step % check_every != 0 {
+    if step == 0 || !step.is_multiple_of(check_every) {
         return;
     }
     let dep = world.resource::<Deposition>().clone();
@@ -246,7 +246,7 @@ pub fn compression(world: &mut World) {
             x.0 = lo + (x.0 - lo) * factor;
         }
     }
-    if done && step % comp.check_every == 0 {
+    if done && step.is_multiple_of(comp.check_every) {
         let ratio = unbalanced_force_ratio(world);
         if let Some(r) = ratio
             && r <= comp.unbalanced_force

@@ -360,15 +360,17 @@ impl From<ContactGeometryPartsWithPoint> for ContactGeometryParts {
     }
 }
 
+/// One entry of a binary state's contact list (`None` at its end) and the bytes after it.
+type ContactAndRest<'a> = (Option<BinaryContact<Vec<u8>>>, &'a [u8]);
+
 /// [`take_contact`] for one format's geometry.
-type TakeContact =
-    for<'a> fn(&'a [u8]) -> postcard::Result<(Option<BinaryContact<Vec<u8>>>, &'a [u8])>;
+type TakeContact = for<'a> fn(&'a [u8]) -> postcard::Result<ContactAndRest<'a>>;
 
 /// Reads the next entry of a binary state's contact list, whose geometry is encoded as
 /// `G`: `None` at the list's end.
 fn take_contact<G: serde::de::DeserializeOwned + Into<ContactGeometryParts>>(
     bytes: &[u8],
-) -> postcard::Result<(Option<BinaryContact<Vec<u8>>>, &[u8])> {
+) -> postcard::Result<ContactAndRest<'_>> {
     let (c, rest): (Option<BinaryContact<Vec<u8>, G>>, _) = postcard::take_from_bytes(bytes)?;
     let c = c.map(|c| BinaryContact {
         a: c.a,
@@ -417,7 +419,7 @@ fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<
         "a state saved with the frozen grains' totals left unsummed: synchronize first"
     );
     let config = world.resource::<SimConfig>().clone();
-    let clock = world.resource::<Clock>().clone();
+    let clock = *world.resource::<Clock>();
     let materials: Vec<String> = world
         .resource::<Materials>()
         .0
@@ -455,7 +457,7 @@ fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<
         format: STATE_FORMAT,
         talus_version: env!("CARGO_PKG_VERSION").to_string(),
         scene: scene.to_string(),
-        dimension: config.dimension.as_number() as u8,
+        dimension: config.dimension.as_number(),
         time_step: config.dt,
         step: clock.step,
         time: clock.time,
@@ -797,6 +799,8 @@ mod tests {
             f64::MAX,
             -0.0,
             1e300,
+            // The largest subnormal, written as it is often quoted.
+            #[allow(clippy::excessive_precision)]
             2.2250738585072009e-308,
         ];
         for _ in 0..2000 {
