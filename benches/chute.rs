@@ -37,7 +37,7 @@ use talus::core::schedule::Stage;
 
 #[path = "support/chute_halves.rs"]
 mod chute_halves;
-use chute_halves::{ExchangedHalves, StepBarrier, chute, step_halves};
+use chute_halves::{ExchangedHalves, StepBarrier, chute, pools_of_one, step_halves};
 
 /// The `talus` binary's allocator (large blocks on huge pages), so that the bench measures
 /// what a run measures.
@@ -77,14 +77,7 @@ fn two_halves(c: &mut Criterion) {
     group.sample_size(10);
     for (x, y) in [(2u32, 1u32), (4, 2)] {
         let barrier = Arc::new(StepBarrier::default());
-        let pools: Vec<rayon::ThreadPool> = (0..2)
-            .map(|_| {
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(1)
-                    .build()
-                    .unwrap()
-            })
-            .collect();
+        let pools = pools_of_one();
         let halves: Vec<(talus::core::schedule::Simulation, usize)> = pools
             .iter()
             .map(|pool| {

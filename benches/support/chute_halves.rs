@@ -31,7 +31,17 @@ pub fn chute(
             "grains: [LammpsData(file: \"data.chute\",",
             &format!("grains: [LammpsData(file: \"data.chute\", replicate: ({x}, {y}, 1),"),
         );
-    let scene = talus::scene::parse(root.join("chute-bench.ron"), &text).expect("valid scene");
+    build_primed(&root.join("chute-bench.ron"), &text, extend)
+}
+
+/// The scene `text` (read as if from `path`) built with `extend` and primed, with its grain
+/// count.
+fn build_primed(
+    path: &Path,
+    text: &str,
+    extend: impl FnOnce(&mut talus::core::schedule::SimBuilder),
+) -> (Simulation, usize) {
+    let scene = talus::scene::parse(path, text).expect("valid scene");
     let mut built = scene.build(&talus::registry()).expect("valid scene");
     let n = built.grain_count;
     extend(&mut built.builder);
@@ -43,6 +53,18 @@ pub fn chute(
         .resource_mut::<talus::core::resources::KineticEnergyDue>()
         .0 = false;
     (sim, n)
+}
+
+/// Two rayon pools of one thread each, one a half.
+pub fn pools_of_one() -> Vec<rayon::ThreadPool> {
+    (0..2)
+        .map(|_| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap()
+        })
+        .collect()
 }
 
 /// A barrier two halves meet at once a step, spinning (a parked
@@ -198,15 +220,7 @@ pub fn exchanged_half(
         text.contains("\"ghost\", frozen: true"),
         "chute.ron changed: update the halves' scene"
     );
-    let scene = talus::scene::parse(dir.join("chute-half.ron"), &text).expect("valid scene");
-    let mut built = scene.build(&talus::registry()).expect("valid scene");
-    extend(&mut built.builder);
-    let mut sim = built.builder.build();
-    sim.prime().unwrap();
-    sim.world
-        .resource_mut::<talus::core::resources::KineticEnergyDue>()
-        .0 = false;
-    sim
+    build_primed(&dir.join("chute-half.ron"), &text, extend).0
 }
 
 /// The grains a half sends (dense indices in its snapshot, in the order of the other half's
@@ -324,14 +338,7 @@ impl ExchangedHalves {
     /// grains.
     pub fn new(atoms: &[talus::scene::lammps::Atom], r: u32, dir: &Path) -> Self {
         let exchange = Arc::new(HaloExchange::default());
-        let pools: Vec<rayon::ThreadPool> = (0..2)
-            .map(|_| {
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(1)
-                    .build()
-                    .unwrap()
-            })
-            .collect();
+        let pools = pools_of_one();
         let mut own_grains = 0;
         let halves: Vec<Simulation> = (0..2)
             .map(|half| {
