@@ -17,14 +17,13 @@
 //! plus ghosts — frozen copies of the other half's grains within 1.1 d (a diameter and the
 //! list's skin) of the two cuts — whose positions, velocities and spins are copied from the
 //! other half at the same barrier every step, as a subdomain's ghost grains are refreshed by
-//! a forward communication. A
-//! contact straddling a cut is evaluated on both sides (LAMMPS's `newton off`); nothing
-//! migrates (the ghosts stay the grains that began within the halo, which the flow carries
-//! along with their neighbours), so the halves keep the whole flow's contacts (within
-//! 0.5 % of the whole replica's plus those straddling a cut, over 1,500 steps). A ghost is
-//! frozen (zero inverse mass), so a straddling contact's dashpot takes the own grain's mass
-//! for the reduced mass, as against the frozen base: a simplification of the physics that
-//! changes none of the work. The `chute_rounds` bench runs the same halves interleaved,
+//! a forward communication. A contact straddling a cut is evaluated on both sides (LAMMPS's
+//! `newton off`); nothing migrates (the ghosts stay the grains that began within the halo,
+//! which the flow carries along with their neighbours), so the halves keep the whole flow's
+//! contacts (within 0.5 % of the whole replica's plus those straddling a cut, over 1,500
+//! steps). A ghost is frozen (zero inverse mass), so a straddling contact's dashpot takes the
+//! own grain's mass for the reduced mass, as against the frozen base: a simplification of
+//! the physics that changes none of the work. The `chute_rounds` bench runs the same halves interleaved,
 //! round by round, with the whole replica on 1 and 2 threads.
 
 use std::path::Path;

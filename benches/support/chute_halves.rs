@@ -216,8 +216,12 @@ pub fn exchanged_half(
             "(type: 2, material: \"base\", frozen: true),",
             "(type: 2, material: \"base\", frozen: true),\n        (type: 3, material: \"ghost\", frozen: true),",
         );
+    // Each substitution must have found its text, or the halves would run another scene.
     assert!(
-        text.contains("\"ghost\", frozen: true"),
+        text.contains("periodic: (y:")
+            && text.contains("(name: \"ghost\"")
+            && text.contains(&format!("file: \"{name}\""))
+            && text.contains("\"ghost\", frozen: true"),
         "chute.ron changed: update the halves' scene"
     );
     build_primed(&dir.join("chute-half.ron"), &text, extend).0
