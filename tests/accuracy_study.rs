@@ -2,7 +2,7 @@
 //! t_c = 2.9433 δ_max/v converges at second order as the step shrinks, and the tool writes
 //! its table, CSV and plot.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

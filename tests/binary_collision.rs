@@ -1,7 +1,7 @@
 //! Two-grain head-on collisions with the linear spring–dashpot law against the
 //! analytic damped oscillator: restitution e and contact time π / √(k/m* − (c/2m*)²).
 
-mod common;
+use crate::common;
 
 use std::f64::consts::PI;
 

@@ -2,8 +2,6 @@
 //! physics as LAMMPS gives the same kinetic energies. LAMMPS's output for this input:
 //! Σ½mv² = 784139.13 and Σ½Iω² = 1601.1263 at step 0; 784292.08 and 1571.0968 at step 100.
 
-mod common;
-
 use std::path::Path;
 
 use talus::cli::ReportSample;

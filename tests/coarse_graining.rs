@@ -5,7 +5,7 @@
 //! and the plumbing: the system only when asked for, located errors, `fields.json`, the
 //! point clouds in the recording.
 
-mod common;
+use crate::common;
 
 use common::sampling::{field, region, regions};
 use glam::DVec3;

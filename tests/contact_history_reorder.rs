@@ -7,7 +7,7 @@
 //! taken is not one at which the narrow phase sorts the contact tables, which moves
 //! contacts among entities; `tests/contact_table_sort.rs` tests that.)
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 

@@ -11,7 +11,7 @@
 //! as a freshly spawned contact would, so a run does the same with and without it, up to
 //! the same order of sums.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -5,7 +5,7 @@
 //! motion ever finds it stale, and a non-finite velocity is still caught. The frozen grains'
 //! force totals, left unsummed between unobserved steps, come back to the bit.
 
-mod common;
+use crate::common;
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;

@@ -1,7 +1,7 @@
 //! Determinism: the same scene run twice, or on another number of threads, gives
 //! bit-identical reports (timings excluded).
 
-mod common;
+use crate::common;
 
 use talus::cli::{RunOptions, run_scene};
 

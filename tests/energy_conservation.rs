@@ -1,7 +1,7 @@
 //! Conservation: elastic (e = 1), frictionless grains in a closed box without gravity
 //! keep their total energy (kinetic + elastic) over 100,000 steps at the default step.
 
-mod common;
+use crate::common;
 
 #[test]
 fn total_energy_drift_is_below_1e_minus_4() {

@@ -3,7 +3,7 @@
 //! step. Each asserts that nothing turns NaN, that overlaps stay bounded, and that the
 //! mechanical energy does not grow where physics forbids it.
 
-mod common;
+use crate::common;
 
 use talus::cli::{ReportSample, RunError, RunOptions, run_scene};
 use talus::core::schedule::Simulation;

@@ -10,7 +10,7 @@
 //! branches have a secant stiffness K_r (A/Δ_e)^(β−1) that grows as the amplitude A
 //! falls, and lose the fraction 1 − β of the energy per half cycle whatever the rate.
 
-mod common;
+use crate::common;
 
 use talus::cli::ReportSample;
 
@@ -426,7 +426,7 @@ fn figure_data_dir() -> std::path::PathBuf {
 
 /// Writes the rocking time series of both models (every 10th step) and the frequency
 /// of each half cycle, for the figures of `docs/laws/hdem.md`. Run once with
-/// `cargo test --release --test hdem -- --ignored write_rocking_figure_data`.
+/// `cargo test --release --test physics -- --ignored hdem::write_rocking_figure_data`.
 #[test]
 #[ignore]
 fn write_rocking_figure_data() {

@@ -4,7 +4,7 @@
 //! impulse of an oblique sliding impact, scene errors, and the energy bookkeeping.
 //! Every reference is computed here from its formula, not from the law's own code.
 
-mod common;
+use crate::common;
 
 use talus::scene::{SceneError, parse};
 

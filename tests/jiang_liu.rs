@@ -6,7 +6,7 @@
 //! the law's own earlier output. The law's own discrete identity and the reduction to
 //! the paper's 2-D equations are unit tests of `talus-jiang-liu`.
 
-mod common;
+use crate::common;
 
 use talus::cli::ReportSample;
 

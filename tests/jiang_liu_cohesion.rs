@@ -8,7 +8,7 @@
 //! kinetic energy is at most K₀. A cohesive pair that is captured by the well stays below
 //! K₀ for ever.
 
-mod common;
+use crate::common;
 
 use talus::cli::ReportSample;
 

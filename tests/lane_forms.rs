@@ -6,7 +6,7 @@
 //! settling in a walled box (grain–wall contacts go through the scalar form, and a pile
 //! near rest keeps some normals unturned), without friction, and without the energy ledger.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -5,7 +5,7 @@
 //! a frictional packing sheared from rest develops the linear mean velocity profile; and
 //! the stress ratio μ = τ/p of dense simple shear rises with the inertial number I.
 
-mod common;
+use crate::common;
 
 use glam::DVec3;
 
@@ -727,7 +727,7 @@ fn fit_linear(points: &[(f64, f64)]) -> (f64, f64, f64) {
 /// constant volume at five solid fractions and three or four rates each. Writes the reference
 /// scene `scenes/shear/simple-shear-2d.ron`, the figure `docs/figures/rheology-mu-i.svg`,
 /// and prints the table. About ten minutes on two cores:
-/// `cargo test --release -p talus --test lees_edwards -- --ignored --nocapture rheology_study`
+/// `cargo test --release -p talus --test physics -- --ignored --nocapture lees_edwards::rheology_study`
 #[test]
 #[ignore = "regenerates docs/rheology.md's figure and table (minutes)"]
 fn rheology_study() {

@@ -5,7 +5,7 @@
 //! (the images across the gradient seam carrying their velocity jump), the sampled Gaussian
 //! of a lone grain at its sheared image, and the uninterrupted run.
 
-mod common;
+use crate::common;
 
 use common::sampling::{field, regions};
 use glam::DVec3;

@@ -9,7 +9,7 @@
 //! the pull's work across the gap, f_0²/(2k_c), plus its work inside the overlap less the
 //! spring's, f_0 δ_0 + ½k_c δ_0² − ½k_n δ_0² = ½f_0 δ_0: W = f_0²/(2k_c) + f_0²/(2(k_n − k_c)).
 
-mod common;
+use crate::common;
 
 use talus::cli::ReportSample;
 

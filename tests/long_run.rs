@@ -1,7 +1,7 @@
 //! A long run keeps no bookkeeping that grows with the number of steps: what a run holds
 //! between steps is bounded by its grains and live contacts, not by its history.
 
-mod common;
+use crate::common;
 
 use std::collections::HashSet;
 

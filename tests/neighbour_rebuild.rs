@@ -8,7 +8,7 @@
 //! derived afresh at every build in the eager run, set and cleared contact by contact
 //! between builds in the lazy one.
 
-mod common;
+use crate::common;
 
 use talus::collision::NeighbourList;
 use talus::contact::{Contact, LawState};

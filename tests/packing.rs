@@ -2,7 +2,7 @@
 //! fraction at a bounded inertial number, and sequential deposition in batches; each
 //! checked against what a packing in static equilibrium must satisfy.
 
-mod common;
+use crate::common;
 
 use bevy_ecs::prelude::*;
 use talus::core::prelude::*;

@@ -2,7 +2,7 @@
 //! middle of the box (translation invariance), and a frictional gas in a fully periodic
 //! box conserves momentum exactly and energy to the integrator's error.
 
-mod common;
+use crate::common;
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;

@@ -2,7 +2,7 @@
 //! stays constant. Each term is computed from its own formula (see
 //! docs/physics/energy-accounting.md), so the balance measures the integration error.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

@@ -1,7 +1,7 @@
 //! The rerun recording of a run holds every grain and one force-chain strip per active
 //! contact at each recorded step (read back from the .rrd file).
 
-mod common;
+use crate::common;
 
 use talus::cli::{RunOptions, run_scene};
 

@@ -1,6 +1,6 @@
 //! Long rest: a settled grain on a floor stays put (no creep) over a million steps.
 
-mod common;
+use crate::common;
 
 #[test]
 fn settled_grain_moves_less_than_1e_minus_9_radius_in_a_million_steps() {

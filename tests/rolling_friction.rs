@@ -1,7 +1,7 @@
 //! Friction: a grain launched sliding without spin on a floor ends rolling without
 //! slipping at v = 5/7 v₀ (sphere) or 2/3 v₀ (disk), the rigid-body Coulomb result.
 
-mod common;
+use crate::common;
 
 fn scene(dimension: u8) -> String {
     // A disk of unit thickness weighs πρR²·1 m = 2.45 kg: stiffer contact, so that the

@@ -4,7 +4,7 @@
 //! spin about the normal linearly; the elastic–plastic spring brings a grain to rest
 //! where the constant torque chatters; scene errors; and the energy bookkeeping.
 
-mod common;
+use crate::common;
 
 use talus::cli::ReportSample;
 

@@ -3,7 +3,7 @@
 //! energy totals), through the library and through `talus run --resume`; a scene can
 //! start from a saved packing with its contacts and their histories.
 
-mod common;
+use crate::common;
 
 use talus::cli::{RunOptions, run_scene};
 use talus::core::schedule::Simulation;

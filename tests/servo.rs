@@ -1,7 +1,7 @@
 //! A servo wall holds a pressure: a packing squeezed by a servo-controlled lid settles with
 //! the lid's load equal to the target, and the sampled stress equal to the target pressure.
 
-mod common;
+use crate::common;
 
 use talus::cli::ReportSample;
 

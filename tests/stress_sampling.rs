@@ -4,7 +4,7 @@
 //! velocities, the inertial number of an imposed shear — and the plumbing: the stress
 //! system only when asked for, located errors for bad input, the report and recording.
 
-mod common;
+use crate::common;
 
 use common::sampling::{region, regions};
 use glam::DVec3;

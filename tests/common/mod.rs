@@ -69,9 +69,12 @@ pub fn energies(sim: &Simulation) -> (EnergySnapshot, EnergyLedger) {
     )
 }
 
-/// A fresh temporary folder for a test.
+/// A fresh temporary folder for a test, never the same twice in one process (the tests
+/// share one binary and run on several threads).
 pub fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("talus-test-{name}-{}", std::process::id()));
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("talus-test-{name}-{}-{call}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -3,7 +3,7 @@
 //! `target/hdem-figures/`. Run from the workspace root:
 //!
 //! ```text
-//! cargo test --release --test hdem -- --ignored write_rocking_figure_data
+//! cargo test --release --test physics -- --ignored hdem::write_rocking_figure_data
 //! cargo run --release -p talus-hdem --example hdem_figures
 //! ```
 
