@@ -1,7 +1,7 @@
 //! The workspace-level tests, one module per file of this folder, built as one test binary:
 //! each binary links the whole dependency tree (bevy_ecs, rerun with arrow) and
-//! instantiates the simulation's generic code anew, so thirty binaries cost CI about four
-//! minutes of compiling and linking that one binary does not. Run one file's tests with
+//! instantiates the simulation's generic code anew: thirty binaries took CI about four minutes
+//! to compile and link on two cores, one takes under one. Run one file's tests with
 //! `cargo test --release --test physics chute::` (the module name, then `::`).
 
 mod common;
