@@ -18,6 +18,9 @@ use talus::core::schedule::Simulation;
 #[allow(dead_code)] // the halves themselves are the other benches'
 mod chute_halves;
 use chute_halves::chute;
+#[path = "support/rounds.rs"]
+mod rounds;
+use rounds::median;
 
 /// The `talus` binary's allocator, as in the `chute` bench.
 #[global_allocator]
@@ -59,17 +62,6 @@ fn in_turn(mut sims: Vec<Simulation>, grains: usize, steps: u64) -> f64 {
 fn copies(count: usize, x: u32, y: u32) -> (Vec<Simulation>, usize) {
     let sims: Vec<_> = (0..count).map(|_| chute(x, y, |_| {}).0).collect();
     (sims, count * COPY_GRAINS * (x * y) as usize)
-}
-
-/// The median of `values` (the mean of the middle two for an even count).
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 fn main() {

@@ -15,6 +15,9 @@ use std::time::Instant;
 #[path = "support/chute_halves.rs"]
 mod chute_halves;
 use chute_halves::{ExchangedHalves, chute};
+#[path = "support/rounds.rs"]
+mod rounds;
+use rounds::median;
 
 /// The `talus` binary's allocator, as in the `chute` bench.
 #[global_allocator]
@@ -50,17 +53,6 @@ fn halves(atoms: &[talus::scene::lammps::Atom], r: u32, steps: u64) -> f64 {
     let start = Instant::now();
     halves.run_steps(steps);
     halves.own_grains as f64 * steps as f64 / start.elapsed().as_secs_f64() / 1e6
-}
-
-/// The median of `values` (the mean of the middle two for an even count).
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 fn main() {
