@@ -582,8 +582,8 @@ type FrozenGrains<'w, 's> = Query<'w, 's, (), (With<Grain>, With<Frozen>)>;
 /// starting from the grains' weights: [`SimBuilder::gravity_in_force_sums`]) and
 /// walls, and the contact energies the force loops summed per chunk
 /// ([`ContactEnergyPartials`], emptied here) into the ledger and the energy snapshot.
-/// Every sum is taken in a fixed order (contacts in query order for each grain and wall,
-/// chunks in order for the energies), so the results are bit-reproducible on any number
+/// Every sum is taken in a fixed order (contacts in reverse query order for each grain,
+/// in query order for each wall, chunks in order for the energies), so the results are bit-reproducible on any number
 /// of threads; the grains' sums run in parallel over ranges of grains. At a step that
 /// may leave them ([`FrozenTotals::leave_this_step`]) the frozen grains' totals are not
 /// summed ([`FrozenTotals::pending`]; [`sum_left_frozen_totals`] sums them later).
@@ -699,7 +699,8 @@ type SumPart<'a> = (usize, &'a mut [Force], &'a mut [Torque], &'a [Mass]);
 /// Sets the force and torque totals of the grains `which` names from the contact tables
 /// (see [`sum_range`]); returns whether it left a table of frozen grains out.
 ///
-/// Each grain sums its contacts' forces in table order, whichever thread does it, so the
+/// Each grain sums its contacts' forces in reverse table order ([`sum_range`]), whichever
+/// thread does it, so the
 /// totals are the same bit for bit on any number of threads: the grains' force and
 /// torque columns (in snapshot order) are split into one range per thread, and each
 /// range's thread sets its totals to the weights, reads every contact's body indices
@@ -799,8 +800,14 @@ fn sum_frozen_totals(
 
 /// One thread's share of [`sum_grain_totals`]: sets the force totals of the grains
 /// `first..first + force.len()` (in snapshot order) to their weights m `g` and their torque
-/// totals to zero, and adds to them, in table order, the forces and torques of the
-/// contacts that touch them.
+/// totals to zero, and adds to them the forces and torques of the contacts that touch
+/// them in reverse table order: the last table first, each from its last row to its
+/// first, the second body's side of a row before the first body's. The force loop, just
+/// before, ran forwards, so the rows it wrote last are still in cache when this scan reads
+/// them, and the totals this scan writes last (the lowest grains') are the first the next
+/// step's kick reads (measured against a forward scan by switching between the two every
+/// few steps inside one run: 2–3 % faster at 32,000 grains and on 2 threads, about 1 %
+/// slower at 512,000 grains on 1 thread; `docs/performance-log.md`, session 41).
 ///
 /// With `pick` (two or more threads), every contact's two bodies are first tested against
 /// the range without a branch, each side in range appended to `picked` as
@@ -812,12 +819,12 @@ fn sum_frozen_totals(
 /// and picking would only add a pass. Either way the sums are taken in the same order.
 ///
 /// A range of at least [`LATE_START_GRAINS`] grains has its totals set to their weights as
-/// the scan of the contacts reaches them, [`START_LEAD`] grains ahead of the largest body of
-/// each block of [`START_BLOCK`] contacts (of each block of picked contacts with `pick`),
-/// instead of in a pass of their own first: the contact table is in the order of its first
-/// bodies and a second body is at most two layers of cells further (`docs/architecture.md`,
-/// "Grain order"), so a total is set shortly before the contacts add to it, while its line
-/// is still in cache. A pass of its own over a large range writes every total out to memory
+/// the scan of the contacts reaches them, down to [`START_LEAD`] grains below the smallest
+/// body of each block of [`START_BLOCK`] contacts (of each block of picked contacts with
+/// `pick`), instead of in a pass of their own first: the contact table is in the order of
+/// its first bodies and a second body is at most two layers of cells further
+/// (`docs/architecture.md`, "Grain order"), so as the scan runs down a total is set shortly
+/// before the contacts add to it, while its line is still in cache. A pass of its own over a large range writes every total out to memory
 /// and the additions read them back
 /// (13–18 % of this stage at 512,000 grains on one thread, 10–16 % on two). The additions'
 /// order, hence every bit, is the same either way.
@@ -842,12 +849,6 @@ fn sum_range(
         }
         torque[from..to].fill(Torque(DVec3::ZERO));
     };
-    // The totals `..started` are set.
-    let mut started = 0;
-    if len < LATE_START_GRAINS {
-        start(force, torque, 0, len);
-        started = len;
-    }
     // Adds one side of a contact; `b_side` for the second body, whose force is opposite.
     let add = |force: &mut [Force],
                torque: &mut [Torque],
@@ -865,71 +866,86 @@ fn sum_range(
         }
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
-    // One past a body's offset in the range, 0 outside it.
-    let reach = |body: u32| {
+    // The scan runs from the table's last row to its first: the force loop, just before,
+    // ran from first to last, so the rows it wrote last are still in cache when this scan
+    // reads them, and the totals this scan writes last (the lowest grains) are the first
+    // the next step's kick reads. The totals `set_from..` are set.
+    let mut set_from = len;
+    if len < LATE_START_GRAINS {
+        start(force, torque, 0, len);
+        set_from = 0;
+    }
+    // A body's offset in the range, `usize::MAX` outside it.
+    let offset = |body: u32| {
         let k = (body as usize).wrapping_sub(first);
-        if k < len { k + 1 } else { 0 }
+        if k < len { k } else { usize::MAX }
     };
     if !pick {
-        for &(bodies, forces) in tables {
-            for (block, rows) in bodies.chunks(START_BLOCK).enumerate() {
-                if started < len {
-                    let needed = rows.iter().map(|b| reach(b.a).max(reach(b.b))).max();
-                    if let Some(needed) = needed.filter(|&n| n > started) {
-                        let to = (needed + START_LEAD).min(len);
-                        start(force, torque, started, to);
-                        started = to;
+        for &(bodies, forces) in tables.iter().rev() {
+            let blocks = bodies.len().div_ceil(START_BLOCK);
+            for block in (0..blocks).rev() {
+                let block_start = block * START_BLOCK;
+                let rows = &bodies[block_start..(block_start + START_BLOCK).min(bodies.len())];
+                if set_from > 0 {
+                    let low = rows.iter().map(|b| offset(b.a).min(offset(b.b))).min();
+                    if let Some(low) = low.filter(|&l| l < set_from) {
+                        let from = low.saturating_sub(START_LEAD);
+                        start(force, torque, from, set_from);
+                        set_from = from;
                     }
                 }
-                let block_start = block * START_BLOCK;
-                for (row, b) in (block_start..).zip(rows) {
-                    // The table is in the order of its first bodies, so the first sides'
-                    // totals are read in order; the second bodies' are not, and miss a
-                    // core's own cache: ask for them a few contacts ahead.
-                    if let Some(ahead) = bodies.get(row + SUM_AHEAD) {
+                for (row, b) in (block_start..block_start + rows.len()).zip(rows).rev() {
+                    if let Some(ahead) = row.checked_sub(SUM_AHEAD).map(|r| &bodies[r]) {
                         let j = (ahead.b as usize).wrapping_sub(first);
                         prefetch_item(force, j);
                         prefetch_item(torque, j);
                     }
                     let f = &forces[row];
-                    if in_range(b.a) {
-                        add(force, torque, b, f, false);
-                    }
                     if in_range(b.b) {
                         add(force, torque, b, f, true);
+                    }
+                    if in_range(b.a) {
+                        add(force, torque, b, f, false);
                     }
                 }
             }
         }
         // Grains no contact touches.
-        start(force, torque, started, len);
+        start(force, torque, 0, set_from);
         return;
     }
     // Two entries a contact at most, plus the one written past the last kept; blocks of
     // contacts keep the list small (no buffer that grows with the packing) and in cache.
     picked.resize(2 * PICK_BLOCK + 1, 0);
-    for &(bodies, forces) in tables {
-        for (bodies, forces) in bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK)) {
+    for &(bodies, forces) in tables.iter().rev() {
+        let blocks = bodies.len().div_ceil(PICK_BLOCK);
+        for block in (0..blocks).rev() {
+            let block_start = block * PICK_BLOCK;
+            let block_end = (block_start + PICK_BLOCK).min(bodies.len());
+            let (bodies, forces) = (
+                &bodies[block_start..block_end],
+                &forces[block_start..block_end],
+            );
             let mut count = 0;
-            // One past the largest offset picked (0 for none).
-            let mut needed = 0;
+            // The lowest offset picked (`usize::MAX` for none).
+            let mut low = usize::MAX;
             for (row, b) in bodies.iter().enumerate() {
                 let code = (row as u32) << 1;
                 picked[count] = code;
                 count += usize::from(in_range(b.a));
                 picked[count] = code | 1;
                 count += usize::from(in_range(b.b));
-                needed = needed.max(reach(b.a).max(reach(b.b)));
+                low = low.min(offset(b.a).min(offset(b.b)));
             }
-            if needed > started {
-                let to = (needed + START_LEAD).min(len);
-                start(force, torque, started, to);
-                started = to;
+            if low < set_from {
+                let from = low.saturating_sub(START_LEAD);
+                start(force, torque, from, set_from);
+                set_from = from;
             }
-            for k in 0..count {
+            for k in (0..count).rev() {
                 let code = picked[k];
-                if k + SUM_AHEAD < count {
-                    let ahead = picked[k + SUM_AHEAD];
+                if k >= SUM_AHEAD {
+                    let ahead = picked[k - SUM_AHEAD];
                     let b = &bodies[(ahead >> 1) as usize];
                     let j = if ahead & 1 == 1 { b.b } else { b.a } as usize;
                     prefetch_item(force, j.wrapping_sub(first));
@@ -941,7 +957,7 @@ fn sum_range(
         }
     }
     // Grains no contact touches.
-    start(force, torque, started, len);
+    start(force, torque, 0, set_from);
 }
 
 /// The smallest range of grains whose totals [`sum_range`] sets as its scan reaches them:
@@ -954,8 +970,8 @@ const LATE_START_GRAINS: usize = 65_536;
 /// set before adding them.
 const START_BLOCK: usize = 64;
 
-/// How many grains beyond the largest body of a block of contacts [`sum_range`] sets at
-/// once, so that a new stretch of totals is set once every few blocks, not at every one.
+/// How many grains below the smallest body of a block of contacts [`sum_range`] (scanning
+/// down) sets at once, so that a new stretch of totals is set once every few blocks, not at every one.
 const START_LEAD: usize = 1024;
 
 /// How many contacts (or picked sides) ahead [`sum_range`] asks for the totals it will add
@@ -1012,8 +1028,8 @@ mod tests {
 
     /// The sums of one range past [`LATE_START_GRAINS`], whose totals are set late, on one
     /// thread's path and on the picking path of two, against their definition: each total
-    /// the grain's weight plus, in table order, the force (or its opposite) and torque of
-    /// every contact that touches it. Contacts mostly in the order of their first bodies,
+    /// the grain's weight plus, in reverse table order (the last table's last row first),
+    /// the force (or its opposite) and torque of every contact that touches it. Contacts mostly in the order of their first bodies,
     /// their second bodies up to 3,000 grains further, every 40th row out of order (a
     /// recycled row), some with a wall, bodies before and after the range, two tables.
     #[test]
@@ -1049,8 +1065,8 @@ mod tests {
         let g = DVec3::new(0.44, 0.0, -0.9);
         let mut force_expected: Vec<DVec3> = mass.iter().map(|m| g * m.0).collect();
         let mut torque_expected = vec![DVec3::ZERO; len];
-        for (bodies, forces) in &tables {
-            for (b, f) in bodies.iter().zip(forces) {
+        for (bodies, forces) in tables.iter().rev() {
+            for (b, f) in bodies.iter().zip(forces).rev() {
                 let (i, j) = (b.a as usize, b.b as usize);
                 if (first..first + len).contains(&i) {
                     force_expected[i - first] += f.force;
