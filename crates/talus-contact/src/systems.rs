@@ -806,8 +806,8 @@ fn sum_frozen_totals(
 /// before, ran forwards, so the rows it wrote last are still in cache when this scan reads
 /// them, and the totals this scan writes last (the lowest grains') are the first the next
 /// step's kick reads (measured against a forward scan by switching between the two every
-/// few steps inside one run: 2–3 % faster at 32,000 grains and on 2 threads, no slower at
-/// 512,000 grains on 1 thread; `docs/performance-log.md`, session 41).
+/// few steps inside one run: 2–4 % faster on 2 threads at every size, no faster on 1
+/// thread; `docs/performance-log.md`, session 41).
 ///
 /// With `pick` (two or more threads), every contact's two bodies are first tested against
 /// the range without a branch, each side in range appended to `picked` as
