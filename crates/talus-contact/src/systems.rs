@@ -578,15 +578,15 @@ type GrainTotals<'w, 's> = Query<
 /// The frozen grains, to tell their tables apart.
 type FrozenGrains<'w, 's> = Query<'w, 's, (), (With<Grain>, With<Frozen>)>;
 
-/// Sums contact forces and torques onto grains (overwriting last step's totals, the forces
-/// starting from the grains' weights: [`SimBuilder::gravity_in_force_sums`]) and
-/// walls, and the contact energies the force loops summed per chunk
-/// ([`ContactEnergyPartials`], emptied here) into the ledger and the energy snapshot.
-/// Every sum is taken in a fixed order (contacts in reverse query order for each grain,
-/// in query order for each wall, chunks in order for the energies), so the results are bit-reproducible on any number
-/// of threads; the grains' sums run in parallel over ranges of grains. At a step that
-/// may leave them ([`FrozenTotals::leave_this_step`]) the frozen grains' totals are not
-/// summed ([`FrozenTotals::pending`]; [`sum_left_frozen_totals`] sums them later).
+/// Sums contact forces and torques onto grains (overwriting last step's totals, the forces starting
+/// from the grains' weights: [`SimBuilder::gravity_in_force_sums`]) and walls, and the contact
+/// energies the force loops summed per chunk ([`ContactEnergyPartials`], emptied here) into the
+/// ledger and the energy snapshot. Every sum is taken in a fixed order (contacts in reverse query
+/// order for each grain, in query order for each wall, chunks in order for the energies), so the
+/// results are bit-reproducible on any number of threads; the grains' sums run in parallel over
+/// ranges of grains. At a step that may leave them ([`FrozenTotals::leave_this_step`]) the frozen
+/// grains' totals are not summed ([`FrozenTotals::pending`]; [`sum_left_frozen_totals`] sums them
+/// later).
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub fn apply_contact_forces(
     snapshot: Res<GrainSnapshot>,
@@ -699,14 +699,13 @@ type SumPart<'a> = (usize, &'a mut [Force], &'a mut [Torque], &'a [Mass]);
 /// Sets the force and torque totals of the grains `which` names from the contact tables
 /// (see [`sum_range`]); returns whether it left a table of frozen grains out.
 ///
-/// Each grain sums its contacts' forces in reverse table order ([`sum_range`]), whichever
-/// thread does it, so the
-/// totals are the same bit for bit on any number of threads: the grains' force and
-/// torque columns (in snapshot order) are split into one range per thread, and each
-/// range's thread sets its totals to the weights, reads every contact's body indices
-/// (written by the force loop) and adds the forces of those that touch it. Each grain table is a share of
-/// its own and each share reads every contact, so a table left out (the frozen base of a
-/// chute) spares a whole pass over the contacts.
+/// Each grain sums its contacts' forces in reverse table order ([`sum_range`]), whichever thread
+/// does it, so the totals are the same bit for bit on any number of threads: the grains' force and
+/// torque columns (in snapshot order) are split into one range per thread, and each range's thread
+/// sets its totals to the weights, reads every contact's body indices (written by the force loop)
+/// and adds the forces of those that touch it. Each grain table is a share of its own and each
+/// share reads every contact, so a table left out (the frozen base of a chute) spares a whole pass
+/// over the contacts.
 fn sum_grain_totals(
     snapshot: &GrainSnapshot,
     tables: &[(&[ContactBodies], &[ContactForce])],
@@ -824,9 +823,9 @@ fn sum_frozen_totals(
 /// `pick`), instead of in a pass of their own first: the contact table is in the order of
 /// its first bodies and a second body is at most two layers of cells further
 /// (`docs/architecture.md`, "Grain order"), so as the scan runs down a total is set shortly
-/// before the contacts add to it, while its line is still in cache. A pass of its own over a large range writes every total out to memory
-/// and the additions read them back
-/// (13–18 % of this stage at 512,000 grains on one thread, 10–16 % on two). The additions'
+/// before the contacts add to it, while its line is still in cache. A pass of its own over
+/// a large range writes every total out to memory and the additions read them back (13–18 %
+/// of this stage at 512,000 grains on one thread, 10–16 % on two). The additions'
 /// order, hence every bit, is the same either way.
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
@@ -866,10 +865,8 @@ fn sum_range(
         }
     };
     let in_range = |body: u32| (body as usize).wrapping_sub(first) < len;
-    // The scan runs from the table's last row to its first: the force loop, just before,
-    // ran from first to last, so the rows it wrote last are still in cache when this scan
-    // reads them, and the totals this scan writes last (the lowest grains) are the first
-    // the next step's kick reads. The totals `set_from..` are set.
+    // The scan runs from the last row to the first (why: the function's doc). The totals
+    // `set_from..` are set.
     let mut set_from = len;
     if len < LATE_START_GRAINS {
         start(force, torque, 0, len);
@@ -895,6 +892,9 @@ fn sum_range(
                     }
                 }
                 for (row, b) in (block_start..block_start + rows.len()).zip(rows).rev() {
+                    // The table is in the order of its first bodies, so the first sides'
+                    // totals are read in order; the second bodies' are not, and miss a
+                    // core's own cache: ask for them a few contacts ahead (below).
                     if let Some(ahead) = row.checked_sub(SUM_AHEAD).map(|r| &bodies[r]) {
                         let j = (ahead.b as usize).wrapping_sub(first);
                         prefetch_item(force, j);
@@ -971,7 +971,8 @@ const LATE_START_GRAINS: usize = 65_536;
 const START_BLOCK: usize = 64;
 
 /// How many grains below the smallest body of a block of contacts [`sum_range`] (scanning
-/// down) sets at once, so that a new stretch of totals is set once every few blocks, not at every one.
+/// down) sets at once, so that a new stretch of totals is set once every few blocks, not
+/// at every one.
 const START_LEAD: usize = 1024;
 
 /// How many contacts (or picked sides) ahead [`sum_range`] asks for the totals it will add
@@ -1026,11 +1027,11 @@ mod tests {
         }
     }
 
-    /// The sums of one range past [`LATE_START_GRAINS`], whose totals are set late, on one
-    /// thread's path and on the picking path of two, against their definition: each total
-    /// the grain's weight plus, in reverse table order (the last table's last row first),
-    /// the force (or its opposite) and torque of every contact that touches it. Contacts mostly in the order of their first bodies,
-    /// their second bodies up to 3,000 grains further, every 40th row out of order (a
+    /// The sums of one range past [`LATE_START_GRAINS`], whose totals are set late, on one thread's
+    /// path and on the picking path of two, against their definition: each total the grain's weight
+    /// plus, in reverse table order (the last table's last row first), the force (or its opposite)
+    /// and torque of every contact that touches it. Contacts mostly in the order of their first
+    /// bodies, their second bodies up to 3,000 grains further, every 40th row out of order (a
     /// recycled row), some with a wall, bodies before and after the range, two tables.
     #[test]
     fn totals_set_as_the_scan_reaches_them_are_the_plain_sums() {
