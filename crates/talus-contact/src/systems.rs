@@ -879,10 +879,7 @@ fn sum_range(
     };
     if !pick {
         for &(bodies, forces) in tables.iter().rev() {
-            let blocks = bodies.len().div_ceil(START_BLOCK);
-            for block in (0..blocks).rev() {
-                let block_start = block * START_BLOCK;
-                let rows = &bodies[block_start..(block_start + START_BLOCK).min(bodies.len())];
+            for (block, rows) in bodies.chunks(START_BLOCK).enumerate().rev() {
                 if set_from > 0 {
                     let low = rows.iter().map(|b| offset(b.a).min(offset(b.b))).min();
                     if let Some(low) = low.filter(|&l| l < set_from) {
@@ -891,7 +888,9 @@ fn sum_range(
                         set_from = from;
                     }
                 }
-                for (row, b) in (block_start..block_start + rows.len()).zip(rows).rev() {
+                let block_start = block * START_BLOCK;
+                for (row, b) in rows.iter().enumerate().rev() {
+                    let row = block_start + row;
                     // The table is in the order of its first bodies, so the first sides'
                     // totals are read in order; the second bodies' are not, and miss a
                     // core's own cache: ask for them a few contacts ahead (below).
@@ -918,14 +917,8 @@ fn sum_range(
     // contacts keep the list small (no buffer that grows with the packing) and in cache.
     picked.resize(2 * PICK_BLOCK + 1, 0);
     for &(bodies, forces) in tables.iter().rev() {
-        let blocks = bodies.len().div_ceil(PICK_BLOCK);
-        for block in (0..blocks).rev() {
-            let block_start = block * PICK_BLOCK;
-            let block_end = (block_start + PICK_BLOCK).min(bodies.len());
-            let (bodies, forces) = (
-                &bodies[block_start..block_end],
-                &forces[block_start..block_end],
-            );
+        let blocks = bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK));
+        for (bodies, forces) in blocks.rev() {
             let mut count = 0;
             // The lowest offset picked (`usize::MAX` for none).
             let mut low = usize::MAX;
