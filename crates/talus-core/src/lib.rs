@@ -11,6 +11,7 @@ pub mod grain_order;
 pub mod integrate;
 pub mod lanes;
 pub mod periodic;
+pub mod regions;
 pub mod resources;
 pub mod schedule;
 pub mod snapshot;
