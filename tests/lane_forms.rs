@@ -17,7 +17,7 @@ use talus::core::prelude::*;
 use talus_linear_spring::TangentialSpring;
 
 /// Every grain's position, velocity and spin, by entity, as bits.
-fn grain_bits(world: &mut World) -> BTreeMap<u64, Vec<u64>> {
+pub(crate) fn grain_bits(world: &mut World) -> BTreeMap<u64, Vec<u64>> {
     let mut q =
         world.query_filtered::<(Entity, &Position, &Velocity, &AngularVelocity), With<Grain>>();
     q.iter(world)
@@ -33,7 +33,7 @@ fn grain_bits(world: &mut World) -> BTreeMap<u64, Vec<u64>> {
 }
 
 /// Every contact's geometry, force, torques and history, by pair, as bits.
-fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> {
+pub(crate) fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> {
     let mut q = world.query::<(
         &Contact,
         &ContactGeometry,
@@ -62,7 +62,7 @@ fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> {
 }
 
 /// The energies and ledger of the last step, as bits.
-fn energy_bits(world: &World) -> Vec<u64> {
+pub(crate) fn energy_bits(world: &World) -> Vec<u64> {
     let e = world.resource::<EnergySnapshot>();
     let l = world.resource::<EnergyLedger>();
     [
@@ -104,7 +104,7 @@ fn same_with_and_without_lanes(what: &str, text: &str, steps: u64) {
     assert!(with == without, "{what}: the lane form changed the results");
 }
 
-fn chute_text() -> String {
+pub(crate) fn chute_text() -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench");
     std::fs::read_to_string(root.join("chute.ron"))
         .unwrap()

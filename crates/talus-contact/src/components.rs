@@ -155,6 +155,24 @@ pub struct ContactEnergySums {
     pub worst_overlap: (f64, Option<(Entity, Entity)>),
 }
 
+impl ContactEnergySums {
+    /// Adds the sums of contacts evaluated after these: the energies and counts add, and
+    /// the worst overlap stays the first pair that reached the largest ratio.
+    #[inline]
+    pub fn add(&mut self, later: &Self) {
+        self.elastic += later.elastic;
+        for (total, d) in self.dissipated.iter_mut().zip(&later.dissipated) {
+            *total += d;
+        }
+        self.boundary_work += later.boundary_work;
+        self.integration_error += later.integration_error;
+        self.active += later.active;
+        if later.worst_overlap.0 > self.worst_overlap.0 {
+            self.worst_overlap = later.worst_overlap;
+        }
+    }
+}
+
 /// The contact energies of the current step as partial sums, one per chunk of
 /// [`crate::systems::ENERGY_CHUNK_LEN`] contacts: each law's force system appends its chunks in
 /// table order, the laws in schedule order; [`crate::systems::apply_contact_forces`] adds them in

@@ -19,6 +19,7 @@ pub mod kinematics;
 pub mod law;
 pub mod order;
 pub mod params;
+pub mod regions;
 pub mod systems;
 
 pub use components::*;
@@ -31,4 +32,4 @@ pub use kinematics::{ContactKinematics, ContactKinematicsLanes, SpinLanes};
 pub use law::*;
 pub use order::{ContactTableSort, ContactTableSorts};
 pub use params::*;
-pub use systems::{ContactPlugin, LaneForms, unbalanced_force_ratio};
+pub use systems::{ContactPlugin, LaneForms, RegionForceLoop, unbalanced_force_ratio};

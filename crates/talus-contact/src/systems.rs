@@ -9,8 +9,10 @@ use talus_core::prelude::*;
 use crate::components::*;
 use crate::kinematics::{ContactKinematics, ContactKinematicsLanes};
 use crate::law::{ContactLaw, LawChannels, PairParams};
+use crate::regions::{RegionRuns, RowRun};
 use talus_core::lanes::{F4, V4};
-use talus_core::snapshot::prefetch_item;
+use talus_core::regions::GrainRegions;
+use talus_core::snapshot::{prefetch_address, prefetch_item};
 
 /// Contacts per chunk of the force loop: each chunk is evaluated on one thread and sums
 /// its contacts' energies into one [`ContactEnergySums`]. Fixed, not derived from the
@@ -28,6 +30,20 @@ const FORCE_CHUNKS_PER_JOB: usize = 1;
 /// (with its row in its table, as the caller found it) is overwritten with what a spawn
 /// would give its new pair (with the pair's bodies).
 pub type RecycleContacts = fn(&mut World, &[(Entity, usize, Contact, ContactBodies)]);
+
+/// Present: the force loops of steps whose energies are not booked
+/// ([`ContactEnergyBooking`]) evaluate each law's contacts region by region, in regions of
+/// `region_grains` grains ([`talus_core::regions`]; each region's rows listed by
+/// [`RegionRuns`]), instead of in table order. Each contact's results are the same bits
+/// either way (a contact's evaluation reads nothing another writes); only the order in
+/// which the contacts' counts are added changes, and which of two pairs with exactly the
+/// same worst overlap is named.
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RegionForceLoop {
+    /// Grains per region ([`talus_core::regions::REGION_GRAINS`] is the size the stages
+    /// are measured with).
+    pub region_grains: usize,
+}
 
 /// Whether the force loops use the laws' lane forms ([`ContactLaw::evaluate_lanes`])
 /// where a law has one: on unless this resource says otherwise. The results are the same
@@ -131,8 +147,10 @@ pub fn evaluate_law<L: ContactLaw>(
     channels: Res<LawChannels<L>>,
     booking: Option<Res<ContactEnergyBooking>>,
     lane_forms: Option<Res<LaneForms>>,
+    region_loop: Option<Res<RegionForceLoop>>,
     mut partials: ResMut<ContactEnergyPartials>,
     mut idle: ResMut<IdleContacts>,
+    mut region_runs: Local<RegionRuns>,
     mut contacts: Query<(
         &Contact,
         &mut LawState<L::History>,
@@ -231,6 +249,8 @@ pub fn evaluate_law<L: ContactLaw>(
     idle.layout = snapshot.layout;
     idle.evaluated = true;
     let mut outcomes: Vec<(ContactEnergySums, Vec<[u32; 2]>)> = Vec::new();
+    let by_region = region_loop.filter(|_| !book);
+    let regions = by_region.map(|on| GrainRegions::new(snapshot.len(), on.region_grains));
     for (c, mut h, mut g, mut f, mut d) in contacts
         .contiguous_iter_mut()
         .expect("contact query is dense")
@@ -241,22 +261,44 @@ pub fn evaluate_law<L: ContactLaw>(
         let d = d.bypass_change_detection();
         // An indexed parallel iterator extends the list in chunk order.
         outcomes.clear();
-        outcomes.par_extend(
-            c.par_chunks(ENERGY_CHUNK_LEN)
-                .zip(h.par_chunks_mut(ENERGY_CHUNK_LEN))
-                .zip(g.par_chunks_mut(ENERGY_CHUNK_LEN))
-                .zip(f.par_chunks_mut(ENERGY_CHUNK_LEN))
-                .zip(d.par_chunks_mut(ENERGY_CHUNK_LEN))
-                .with_max_len(FORCE_CHUNKS_PER_JOB)
-                .map(|((((c, h), g), f), d)| {
-                    let (sums, idle) = if book {
-                        evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d)
-                    } else {
-                        evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d)
-                    };
-                    (to_global(sums), idle)
-                }),
-        );
+        if let Some(regions) = &regions {
+            region_runs.build(regions, snapshot, c, d);
+            let batches = region_runs.make_batches(ENERGY_CHUNK_LEN);
+            let columns = TableColumns::new(c, h, g, f, d);
+            let (columns, runs) = (&columns, &*region_runs);
+            outcomes.par_extend(
+                (0..batches)
+                    .into_par_iter()
+                    .with_max_len(FORCE_CHUNKS_PER_JOB)
+                    .map(|k| {
+                        let (sums, idle) = evaluate_runs::<L, _>(
+                            &evaluate,
+                            lanes,
+                            snapshot,
+                            columns,
+                            runs.batch(k),
+                        );
+                        (to_global(sums), idle)
+                    }),
+            );
+        } else {
+            outcomes.par_extend(
+                c.par_chunks(ENERGY_CHUNK_LEN)
+                    .zip(h.par_chunks_mut(ENERGY_CHUNK_LEN))
+                    .zip(g.par_chunks_mut(ENERGY_CHUNK_LEN))
+                    .zip(f.par_chunks_mut(ENERGY_CHUNK_LEN))
+                    .zip(d.par_chunks_mut(ENERGY_CHUNK_LEN))
+                    .with_max_len(FORCE_CHUNKS_PER_JOB)
+                    .map(|((((c, h), g), f), d)| {
+                        let (sums, idle) = if book {
+                            evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d)
+                        } else {
+                            evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d)
+                        };
+                        (to_global(sums), idle)
+                    }),
+            );
+        }
         for (sums, pairs) in outcomes.drain(..) {
             partials.push(sums);
             idle.pairs.extend(pairs);
@@ -332,6 +374,142 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
         }
     }
     (sums, idle)
+}
+
+/// The force loop over runs of a law table's rows ([`RegionRuns`]) at a step whose
+/// energies are not booked: each run goes through [`evaluate_chunk`] as a chunk would.
+/// `columns` must not be lent to another call at the same time with any of these rows.
+fn evaluate_runs<L: ContactLaw, F: ScalarEvaluation<L::History>>(
+    evaluate: &F,
+    lanes: Option<&LaneForm<L>>,
+    snapshot: &GrainSnapshot,
+    columns: &TableColumns<L::History>,
+    runs: &[RowRun],
+) -> (ContactEnergySums, Vec<[u32; 2]>) {
+    let mut sums = ContactEnergySums::default();
+    let mut idle = Vec::new();
+    for (q, &[first, end]) in runs.iter().enumerate() {
+        // Between sorts many runs are a single row out of its region's run, read in no
+        // order the hardware follows: ask for the rows of a run a few ahead, and for the
+        // grains of one half as far, whose bodies have come in by now.
+        if let Some(&[ahead, _]) = runs.get(q + RUN_PREFETCH_AHEAD) {
+            columns.prefetch_row(ahead as usize);
+        }
+        if let Some(&[ahead, _]) = runs.get(q + RUN_PREFETCH_AHEAD / 2) {
+            // SAFETY: a row of this call's runs, not lent out now.
+            let bodies = unsafe { columns.bodies_of(ahead as usize) };
+            if bodies.layout == snapshot.layout {
+                snapshot.prefetch(bodies.a as usize);
+                snapshot.prefetch(bodies.b as usize);
+            }
+        }
+        // SAFETY: the runs hold every row of the table once and each batch of them goes to
+        // one call, so no other call holds these rows.
+        let (c, h, g, f, d) = unsafe { columns.rows(first as usize..end as usize) };
+        let (run_sums, run_idle) =
+            evaluate_chunk::<L, F, false>(evaluate, lanes, snapshot, c, h, g, f, d);
+        sums.add(&run_sums);
+        idle.extend(run_idle);
+    }
+    (sums, idle)
+}
+
+/// How many runs ahead [`evaluate_runs`] asks for a run's rows (and for its grains half as
+/// far ahead).
+const RUN_PREFETCH_AHEAD: usize = 8;
+
+/// One law table's columns lent to the force loop's threads at once, each thread taking
+/// rows no other takes (the runs of [`RegionRuns`], which hold every row once): the
+/// rows of a region are not one slice of the table between its sorts, so the table cannot
+/// be split into slices per thread.
+struct TableColumns<'a, H: Send + Sync + 'static> {
+    contacts: &'a [Contact],
+    history: *mut LawState<H>,
+    geometry: *mut ContactGeometry,
+    force: *mut ContactForce,
+    bodies: *mut ContactBodies,
+    _borrow: std::marker::PhantomData<&'a mut [LawState<H>]>,
+}
+
+// SAFETY: the columns are handed out only as disjoint rows ([`TableColumns::rows`]), so
+// threads share them as they would share disjoint `&mut` slices.
+unsafe impl<H: Send + Sync + 'static> Send for TableColumns<'_, H> {}
+unsafe impl<H: Send + Sync + 'static> Sync for TableColumns<'_, H> {}
+
+#[allow(clippy::type_complexity)]
+impl<'a, H: Send + Sync + 'static> TableColumns<'a, H> {
+    fn new(
+        contacts: &'a [Contact],
+        history: &'a mut [LawState<H>],
+        geometry: &'a mut [ContactGeometry],
+        force: &'a mut [ContactForce],
+        bodies: &'a mut [ContactBodies],
+    ) -> Self {
+        let n = contacts.len();
+        assert!(
+            history.len() == n && geometry.len() == n && force.len() == n && bodies.len() == n,
+            "a table's columns have one row per contact"
+        );
+        Self {
+            contacts,
+            history: history.as_mut_ptr(),
+            geometry: geometry.as_mut_ptr(),
+            force: force.as_mut_ptr(),
+            bodies: bodies.as_mut_ptr(),
+            _borrow: std::marker::PhantomData,
+        }
+    }
+
+    /// Asks for the cache lines of row `row` of every column, without reading them.
+    #[inline(always)]
+    fn prefetch_row(&self, row: usize) {
+        if row < self.contacts.len() {
+            prefetch_address(self.contacts.as_ptr().wrapping_add(row));
+            prefetch_address(self.history.wrapping_add(row));
+            prefetch_address(self.geometry.wrapping_add(row));
+            prefetch_address(self.force.wrapping_add(row));
+            prefetch_address(self.bodies.wrapping_add(row));
+        }
+    }
+
+    /// The bodies of row `row`.
+    ///
+    /// # Safety
+    /// No slice alive now may hold the row ([`Self::rows`]).
+    unsafe fn bodies_of(&self, row: usize) -> ContactBodies {
+        assert!(row < self.contacts.len());
+        // SAFETY: in bounds, and not borrowed mutably now (the caller's promise).
+        unsafe { *self.bodies.add(row) }
+    }
+
+    /// The columns' slices over `rows`.
+    ///
+    /// # Safety
+    /// No two sets of slices alive at once may share a row.
+    unsafe fn rows(
+        &self,
+        rows: std::ops::Range<usize>,
+    ) -> (
+        &'a [Contact],
+        &'a mut [LawState<H>],
+        &'a mut [ContactGeometry],
+        &'a mut [ContactForce],
+        &'a mut [ContactBodies],
+    ) {
+        assert!(rows.start <= rows.end && rows.end <= self.contacts.len());
+        let (start, len) = (rows.start, rows.end - rows.start);
+        // SAFETY: in bounds (above), from live `&mut` slices of `'a`, and not shared with
+        // another caller (the caller's promise).
+        unsafe {
+            (
+                &self.contacts[rows],
+                std::slice::from_raw_parts_mut(self.history.add(start), len),
+                std::slice::from_raw_parts_mut(self.geometry.add(start), len),
+                std::slice::from_raw_parts_mut(self.force.add(start), len),
+                std::slice::from_raw_parts_mut(self.bodies.add(start), len),
+            )
+        }
+    }
 }
 
 /// The scalar evaluation of one contact (the force loop's closure): kinematics, the
@@ -638,25 +816,18 @@ pub fn apply_contact_forces(
             }
         }
     }
-    let mut elastic = 0.0;
-    let mut integration_error = 0.0;
-    let mut count = 0usize;
-    let mut worst = 0.0f64;
-    let mut worst_pair = None;
-    let mut wall_work = 0.0;
-    let mut dissipated = [0.0; MAX_DISSIPATION_CHANNELS];
+    let mut step = ContactEnergySums::default();
     for sums in partials.chunks.drain(..) {
-        elastic += sums.elastic;
-        integration_error += sums.integration_error;
-        wall_work += sums.boundary_work;
-        for (total, d) in dissipated.iter_mut().zip(sums.dissipated.iter()) {
-            *total += d;
-        }
-        count += sums.active;
-        if sums.worst_overlap.0 > worst {
-            (worst, worst_pair) = sums.worst_overlap;
-        }
+        step.add(&sums);
     }
+    let ContactEnergySums {
+        elastic,
+        dissipated,
+        boundary_work: wall_work,
+        integration_error,
+        active: count,
+        worst_overlap: (worst, worst_pair),
+    } = step;
     for (total, d) in ledger.dissipated.iter_mut().zip(dissipated.iter()) {
         *total += d;
     }

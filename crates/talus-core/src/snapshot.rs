@@ -432,7 +432,7 @@ fn nearest_separation(
 /// waiting. A hint only: nothing is read or written, and no address faults. Does nothing
 /// off x86-64. Every prefetch of the hot loops goes through this.
 #[inline(always)]
-fn prefetch_address<T>(address: *const T) {
+pub fn prefetch_address<T>(address: *const T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch reads and writes nothing and does not fault, whatever the
     // address; the intrinsic is unsafe only for its target feature, which x86-64 has.
