@@ -17,7 +17,7 @@ use talus::core::prelude::*;
 use talus_linear_spring::TangentialSpring;
 
 /// Every grain's position, velocity and spin, by entity, as bits.
-pub(crate) fn grain_bits(world: &mut World) -> BTreeMap<u64, Vec<u64>> {
+fn grain_bits(world: &mut World) -> BTreeMap<u64, Vec<u64>> {
     let mut q =
         world.query_filtered::<(Entity, &Position, &Velocity, &AngularVelocity), With<Grain>>();
     q.iter(world)
@@ -33,7 +33,7 @@ pub(crate) fn grain_bits(world: &mut World) -> BTreeMap<u64, Vec<u64>> {
 }
 
 /// Every contact's geometry, force, torques and history, by pair, as bits.
-pub(crate) fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> {
+fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> {
     let mut q = world.query::<(
         &Contact,
         &ContactGeometry,
@@ -62,7 +62,7 @@ pub(crate) fn contact_bits(world: &mut World) -> BTreeMap<(u64, u64), Vec<u64>> 
 }
 
 /// The energies and ledger of the last step, as bits.
-pub(crate) fn energy_bits(world: &World) -> Vec<u64> {
+fn energy_bits(world: &World) -> Vec<u64> {
     let e = world.resource::<EnergySnapshot>();
     let l = world.resource::<EnergyLedger>();
     [
@@ -80,11 +80,15 @@ pub(crate) fn energy_bits(world: &World) -> Vec<u64> {
     .collect()
 }
 
-/// Runs `steps` steps of a scene with the lane forms on or off; returns the grains, the
-/// contacts and the energies at the end, and the number of active contacts.
-fn run(text: &str, steps: u64, lanes: bool) -> (impl PartialEq + std::fmt::Debug, usize) {
+/// Runs `steps` steps of a scene whose world `setup` has changed; returns the grains, the
+/// contacts, the energies and the number of active contacts at the end, and that number.
+pub(crate) fn run_with(
+    text: &str,
+    steps: u64,
+    setup: impl FnOnce(&mut World),
+) -> (impl PartialEq + std::fmt::Debug, usize) {
     let (mut sim, _) = common::build(text);
-    sim.world.insert_resource(LaneForms(lanes));
+    setup(&mut sim.world);
     sim.prime().unwrap();
     sim.run_steps(steps).unwrap();
     let contacts = sim.world.resource::<EnergySnapshot>().contacts;
@@ -92,8 +96,16 @@ fn run(text: &str, steps: u64, lanes: bool) -> (impl PartialEq + std::fmt::Debug
         grain_bits(&mut sim.world),
         contact_bits(&mut sim.world),
         energy_bits(&sim.world),
+        contacts,
     );
     (state, contacts)
+}
+
+/// Runs `steps` steps of a scene with the lane forms on or off ([`run_with`]).
+fn run(text: &str, steps: u64, lanes: bool) -> (impl PartialEq + std::fmt::Debug, usize) {
+    run_with(text, steps, move |world| {
+        world.insert_resource(LaneForms(lanes))
+    })
 }
 
 /// Asserts that a scene ends the same with and without the lane forms.

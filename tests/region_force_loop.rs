@@ -8,7 +8,7 @@
 //! region's run of rows, so each region is evaluated in several runs.
 
 use crate::common;
-use crate::lane_forms::{chute_text, contact_bits, energy_bits, grain_bits};
+use crate::lane_forms::{chute_text, run_with};
 
 use talus::collision::ContactIndex;
 use talus::contact::regions::RegionRuns;
@@ -17,27 +17,17 @@ use talus::core::prelude::*;
 use talus::core::regions::{GrainRegions, REGION_GRAINS};
 
 /// Runs `steps` steps of a scene, region by region with regions of `region_grains` grains
-/// or (`None`) in table order; returns the grains, contacts and energies at the end, and
-/// the number of active contacts.
+/// or (`None`) in table order ([`run_with`]).
 fn run(
     text: &str,
     steps: u64,
     region_grains: Option<usize>,
 ) -> (impl PartialEq + std::fmt::Debug, usize) {
-    let (mut sim, _) = common::build(text);
-    if let Some(region_grains) = region_grains {
-        sim.world.insert_resource(RegionForceLoop { region_grains });
-    }
-    sim.prime().unwrap();
-    sim.run_steps(steps).unwrap();
-    let contacts = sim.world.resource::<EnergySnapshot>().contacts;
-    let state = (
-        grain_bits(&mut sim.world),
-        contact_bits(&mut sim.world),
-        energy_bits(&sim.world),
-        contacts,
-    );
-    (state, contacts)
+    run_with(text, steps, move |world| {
+        if let Some(region_grains) = region_grains {
+            world.insert_resource(RegionForceLoop { region_grains });
+        }
+    })
 }
 
 /// Asserts that a scene without the energy ledger ends the same with the force loop run
