@@ -33,7 +33,7 @@ const SPRING: usize = 13;
 /// Every contact by its pair (entity bits of `a` and `b`), with the entity that holds it.
 type Contacts = BTreeMap<(u64, u64), (Entity, Record)>;
 
-/// The contacts of a world ([`Contacts`]).
+/// The contacts of a world ([`Contacts`]), vacant rows left out.
 fn contacts(world: &mut World) -> Contacts {
     let mut q = world.query::<(
         Entity,
@@ -43,6 +43,7 @@ fn contacts(world: &mut World) -> Contacts {
         &LawState<TangentialSpring>,
     )>();
     q.iter(world)
+        .filter(|(_, c, _, _, _)| !c.is_vacant())
         .map(|(e, c, g, f, h)| {
             let numbers = g
                 .normal
@@ -141,21 +142,31 @@ fn a_new_pair_given_an_ended_contacts_entity_starts_as_a_spawned_one() {
     spawned.world.resource_mut::<ContactIndex>().never_recycle = true;
     let before = contacts(&mut recycled.world);
     assert_eq!(before, contacts(&mut spawned.world), "the two runs agree");
-    let holder_before: BTreeMap<Entity, (u64, u64)> =
-        before.iter().map(|(pair, (e, _))| (*e, *pair)).collect();
+    // Every row's entity, vacant rows' too, in each run.
+    let entities = |world: &mut World| -> std::collections::BTreeSet<Entity> {
+        world
+            .query_filtered::<Entity, With<Contact>>()
+            .iter(world)
+            .collect()
+    };
+    let rows_before = [entities(&mut recycled.world), entities(&mut spawned.world)];
     let (recycled_after, spawned_after) = check_twins(&mut recycled, &mut spawned);
-    // In the compared step, entities that held an ended pair now hold a new one.
-    let handed_over = |after: &Contacts| {
+    // In the compared step, entities that held an ended pair or a vacant row now hold a
+    // new pair.
+    let handed_over = |after: &Contacts, rows_before: &std::collections::BTreeSet<Entity>| {
         after
             .iter()
-            .filter(|(pair, (e, _))| holder_before.get(e).is_some_and(|p| p != *pair))
+            .filter(|(pair, (e, _))| !before.contains_key(*pair) && rows_before.contains(e))
             .count()
     };
     let new_pairs = recycled_after
         .keys()
         .filter(|p| !before.contains_key(p))
         .count();
-    let (handed, handed_plain) = (handed_over(&recycled_after), handed_over(&spawned_after));
+    let (handed, handed_plain) = (
+        handed_over(&recycled_after, &rows_before[0]),
+        handed_over(&spawned_after, &rows_before[1]),
+    );
     eprintln!("{new_pairs} new pairs; {handed} of them given an ended contact's entity");
     assert!(
         handed > new_pairs / 2 && handed <= new_pairs,
@@ -213,7 +224,7 @@ fn check_sort(make: &dyn Fn(u64) -> Simulation, steps: u64, min_loaded: usize) {
         let index = sorted.world.resource::<ContactIndex>();
         let snapshot = sorted.world.resource::<GrainSnapshot>();
         let mut q = sorted.world.try_query::<(Entity, &Contact)>().unwrap();
-        for (entity, c) in q.iter(&sorted.world) {
+        for (entity, c) in q.iter(&sorted.world).filter(|(_, c)| !c.is_vacant()) {
             assert_eq!(
                 index.contact_between(snapshot, c.a, c.b),
                 Some(entity),

@@ -67,12 +67,15 @@ fn a_settling_pile_in_a_box_is_the_same_region_by_region() {
 
 /// The runs of rows of each region (`talus::contact::regions::RegionRuns`, regions of
 /// [`REGION_GRAINS`]) in the contact tables after `steps` steps of the chute, and the
-/// contacts, with ended contacts handed to new pairs by region or in table order alone.
-fn region_runs_after(steps: u64, in_table_order: bool) -> (usize, usize) {
+/// contacts, with ended contacts handed to new pairs by region or in table order alone,
+/// and those left over kept as vacant rows or despawned (`despawn`).
+fn region_runs_after(steps: u64, in_table_order: bool, despawn: bool) -> (usize, usize) {
     let (mut sim, _) = common::build(&chute_text());
-    sim.world
-        .resource_mut::<ContactIndex>()
-        .handout_in_table_order = in_table_order;
+    {
+        let mut index = sim.world.resource_mut::<ContactIndex>();
+        index.handout_in_table_order = in_table_order;
+        index.despawn_unused = despawn;
+    }
     sim.prime().unwrap();
     sim.run_steps(steps).unwrap();
     let snapshot = sim.world.resource::<GrainSnapshot>().clone();
@@ -87,7 +90,7 @@ fn region_runs_after(steps: u64, in_table_order: bool) -> (usize, usize) {
     {
         runs.build(&regions, &snapshot, c, d);
         count += runs.all().len();
-        contacts += c.len();
+        contacts += c.iter().filter(|c| !c.is_vacant()).count();
     }
     assert!(regions.count() >= 2, "the chute spans more than one region");
     (count, contacts)
@@ -96,16 +99,28 @@ fn region_runs_after(steps: u64, in_table_order: bool) -> (usize, usize) {
 #[test]
 fn new_contacts_take_ended_rows_of_their_own_region() {
     // 19 steps after the sort at step 20 the table has drifted furthest from its order.
-    let (by_region, contacts) = region_runs_after(39, false);
-    let (in_table_order, _) = region_runs_after(39, true);
+    let (in_table_order, contacts) = region_runs_after(39, true, true);
+    let (by_region, _) = region_runs_after(39, false, true);
+    let (vacant_rows, same_contacts) = region_runs_after(39, false, false);
     assert!(contacts > 10_000);
+    assert_eq!(contacts, same_contacts, "the same flow");
+    eprintln!(
+        "runs of rows: {in_table_order} handed out in table order, {by_region} by region, \
+         {vacant_rows} by region with vacant rows kept"
+    );
     // Right after a sort each region is one run; a contact made out of its region's run
-    // splits it in three. Contacts spawned past the table's end and those a despawn moves
-    // into a freed row still land outside their region's run: with the chute's two regions
-    // 684 runs against 942 (in the 512,000-grain replica, 32 regions, about 20,000 against
-    // 60,000 ten steps after a sort).
+    // splits it in three. Handed out by region, contacts spawned past the table's end and
+    // those a despawn moves into a freed row still land outside their region's run: with
+    // the chute's two regions 684 runs against 942 (in the 512,000-grain replica, 32
+    // regions, about 20,000 against 60,000 ten steps after a sort).
     assert!(
         by_region < in_table_order,
         "runs of rows by region: {by_region} handed out by region, {in_table_order} in table order"
+    );
+    // With the rows of ended contacts kept vacant, and a share of vacant rows given to
+    // each region at each sort, new contacts find rows in their own region.
+    assert!(
+        vacant_rows * 10 < by_region,
+        "runs of rows by region: {vacant_rows} with vacant rows, {by_region} without"
     );
 }

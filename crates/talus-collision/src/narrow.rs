@@ -17,6 +17,7 @@ use bevy_ecs::archetype::ArchetypeId;
 use bevy_ecs::prelude::*;
 use rayon::prelude::*;
 use smallvec::SmallVec;
+use talus_contact::regions::key_grain;
 use talus_contact::{
     Contact, ContactBodies, ContactForce, ContactGeometry, ContactKind, ContactTableSorts,
     IdleContacts,
@@ -122,7 +123,23 @@ pub struct ContactIndex {
     /// grains (off by default; as before the handout by region; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
     pub handout_in_table_order: bool,
+    /// Despawn the ended contacts that no new pair takes, instead of keeping their rows
+    /// vacant for their regions' next new contacts (off by default; the results differ only
+    /// by the order in which contact forces are summed, for comparisons).
+    pub despawn_unused: bool,
+    /// The vacant rows of the contact tables ([`Contact::is_vacant`]), by archetype, region
+    /// of their grain and row: where a new contact goes first. Rows stay put between sorts
+    /// (nothing else despawns a contact), so the list is kept as the narrow phase changes
+    /// it, and found again from the tables after anything that moves rows.
+    vacant: Vec<VacantRow>,
+    /// Whether `vacant` lists the tables' vacant rows as they are; when not, the next pass
+    /// finds them again.
+    vacant_known: bool,
 }
+
+/// A vacant row of a contact table: its archetype, the region of its grain, its row and
+/// its entity.
+type VacantRow = (ArchetypeId, u32, usize, Entity);
 
 impl ContactIndex {
     /// Number of live contacts.
@@ -168,6 +185,12 @@ impl ContactIndex {
     /// dense indices at the next narrow phase.
     pub fn register(&mut self, a: Entity, b: Entity, contact: Entity) {
         self.pending.push((a, b, contact));
+        self.vacant_known = false;
+    }
+
+    /// Number of vacant rows in the contact tables (as of the last narrow phase).
+    pub fn vacant_rows(&self) -> usize {
+        self.vacant.len()
     }
 
     /// Keys the index by the snapshot's order of grains and walls (re-keying it from each
@@ -197,6 +220,8 @@ impl ContactIndex {
             self.per_grain = rekeyed;
             self.layout = s.layout;
             self.live_build = None;
+            // The vacant rows' regions follow their grains' new places.
+            self.vacant_known = false;
         }
         if !self.pending.is_empty() {
             self.live_build = None;
@@ -404,21 +429,40 @@ fn update_contacts_inner(
         }
     };
     orphans.retain(|&c| world.get_entity(c).is_ok());
+    // The rows of ended contacts that no new pair takes stay in their tables, vacant, for
+    // the next new contacts of their regions: a despawn would move the table's last
+    // contact into the freed row, out of its region's rows.
+    let keep_vacant = recycle && !index.despawn_unused;
+    if keep_vacant && !index.vacant_known {
+        index.vacant = find_vacant_rows(world, s, &regions);
+        index.vacant_known = true;
+    }
     let ended = orphans
         .iter()
         .map(|&c| (c, NO_KEY))
         .chain(ended)
-        .map(|(c, key)| (c, ended_region(key)));
-    let mut ended_at: Vec<(ArchetypeId, u32, usize, Entity)> = ended
-        .map(|(c, region)| {
+        .map(|(c, key)| (c, ended_region(key), key));
+    let mut ended_at: Vec<EndedRow> = ended
+        .map(|(c, region, key)| {
             let at = world.entity(c).location();
-            (at.archetype_id, region, at.table_row.index(), c)
+            (at.archetype_id, region, at.table_row.index(), c, key)
         })
         .collect();
-    ended_at.sort_unstable_by_key(|&(archetype, region, row, _)| (archetype, region, row));
+    ended_at.sort_unstable_by_key(|&(archetype, region, row, _, _)| (archetype, region, row));
+    // The vacant rows join them, in the same order: two sorted runs, which a stable sort
+    // merges in one pass.
+    if keep_vacant {
+        ended_at.extend(
+            index
+                .vacant
+                .drain(..)
+                .map(|(archetype, region, row, c)| (archetype, region, row, c, VACANT_KEY)),
+        );
+        ended_at.sort_by_key(|&(archetype, region, row, _, _)| (archetype, region, row));
+    }
     let mut reusable: SmallVec<[Reusable; 2]> = SmallVec::new();
     if recycle {
-        for (k, &(archetype, region, _, _)) in ended_at.iter().enumerate() {
+        for (k, &(archetype, region, _, _, _)) in ended_at.iter().enumerate() {
             let group = match reusable.last_mut() {
                 Some(group) if group.archetype == archetype => group,
                 _ => {
@@ -427,7 +471,12 @@ fn update_contacts_inner(
                         by_region: Vec::new(),
                         spare: 0,
                         reuses: Vec::new(),
-                        recycle: None,
+                        recycle: table
+                            .slots
+                            .iter()
+                            .flatten()
+                            .find(|slot| slot.archetype == archetype)
+                            .map(|slot| slot.recycle),
                     });
                     reusable.last_mut().expect("just pushed")
                 }
@@ -464,7 +513,7 @@ fn update_contacts_inner(
                         k: usize,
                         (i, j, slot, pair): (u32, u32, u32, Contact),
                         law: &LawSlot| {
-        let (_, _, row, contact) = ended_at[k];
+        let (_, _, row, contact, _) = ended_at[k];
         reused[k] = true;
         group.reuses.push((contact, row, pair, bodies_of(i, j)));
         group.recycle = Some(law.recycle);
@@ -542,27 +591,59 @@ fn update_contacts_inner(
             None => to_spawn.push((i, j, slot, pair, law)),
         }
     }
+    // The ended contacts no pair took become vacant rows of their grains (in the same call
+    // that writes the handed-out ones); those whose grain is not known (a body is gone)
+    // are despawned, as are all of them when rows are not kept.
+    let mut removals: Vec<(usize, Entity)> = Vec::new();
+    for (k, &(archetype, region, row, c, key)) in ended_at.iter().enumerate() {
+        if reused[k] {
+            continue;
+        }
+        if key == VACANT_KEY {
+            index.vacant.push((archetype, region, row, c));
+            continue;
+        }
+        let group = reusable
+            .iter_mut()
+            .find(|g| g.archetype == archetype && g.recycle.is_some());
+        match group {
+            Some(group) if keep_vacant && key != NO_KEY => {
+                let bodies = ContactBodies {
+                    a: key,
+                    b: key,
+                    layout: s.layout,
+                };
+                let grain = s.entity[key as usize];
+                group.reuses.push((c, row, Contact::vacant(grain), bodies));
+                index.vacant.push((archetype, region, row, c));
+            }
+            _ => removals.push((row, c)),
+        }
+    }
     for group in &reusable {
-        if let Some(recycle) = group.recycle {
+        if let Some(recycle) = group.recycle
+            && !group.reuses.is_empty()
+        {
             recycle(world, &group.reuses);
         }
     }
-    // The ended contacts not reused go before any spawn, so that new contacts take their
+    // The ended contacts not kept go before any spawn, so that new contacts take their
     // freed rows and entity slots instead of growing the table and the entity list (both
     // double their capacity when full). Despawning moves the last contact of the table
     // into the freed row, so the order of removals sets the order in which forces are
     // summed from then on: last row first, so that no removal moves a contact still to be
     // removed.
-    let mut removals: Vec<(usize, Entity)> = ended_at
-        .iter()
-        .zip(&reused)
-        .filter(|&(_, &reused)| !reused)
-        .map(|(&(_, _, row, c), _)| (row, c))
-        .collect();
     removals.sort_unstable_by_key(|&(row, _)| std::cmp::Reverse(row));
     for &(_, c) in &removals {
         world.despawn(c);
     }
+    if !removals.is_empty() {
+        // A despawn may have moved a vacant row.
+        index.vacant_known = false;
+    }
+    let ContactIndex {
+        per_grain, live, ..
+    } = index;
     for (i, j, slot, pair, law) in to_spawn {
         let contact = (law.spawn)(world, pair, bodies_of(i, j));
         per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
@@ -573,8 +654,160 @@ fn update_contacts_inner(
         .step
         .is_multiple_of(CONTACT_SORT_INTERVAL)
     {
+        if keep_vacant {
+            fit_vacant_rows(world, index, table, s, &regions);
+        }
         sort_contacts(world, index, s);
     }
+}
+
+/// An ended contact or a vacant row in the narrow phase's handout: its archetype, the
+/// region of its key grain, its row, its entity and its key grain ([`NO_KEY`] if not
+/// known, [`VACANT_KEY`] for a row already vacant).
+type EndedRow = (ArchetypeId, u32, usize, Entity, u32);
+
+/// The key of a row that was vacant before the pass.
+const VACANT_KEY: u32 = u32::MAX - 1;
+
+/// The vacant rows of every contact table, by archetype, region of their grain and row.
+fn find_vacant_rows(
+    world: &mut World,
+    s: &GrainSnapshot,
+    regions: &GrainRegions,
+) -> Vec<VacantRow> {
+    let mut found = Vec::new();
+    let mut contacts = world.query::<(Entity, &Contact, &ContactBodies)>();
+    let contacts = contacts.query(world);
+    for (entities, c, b) in contacts.contiguous_iter().expect("contact query is dense") {
+        let Some(&first) = entities.first() else {
+            continue;
+        };
+        let archetype = world.entity(first).location().archetype_id;
+        for (row, (c, b)) in c.iter().zip(b).enumerate() {
+            if c.is_vacant() {
+                let key = key_grain(s, c, b);
+                let region = if key == u32::MAX {
+                    u32::MAX
+                } else {
+                    regions.region_of(key) as u32
+                };
+                found.push((archetype, region, row, entities[row]));
+            }
+        }
+    }
+    found.sort_unstable_by_key(|&(archetype, region, row, _)| (archetype, region, row));
+    found
+}
+
+/// The vacant rows a region is given at a sort: one per this many of its contacts, and
+/// [`VACANT_ROWS_MIN`] at the least. Between two sorts the contacts a region makes, less
+/// those it ends, take its vacant rows; once they are gone its new contacts land in other
+/// regions' rows (`docs/architecture.md` §6 has the measurements).
+const CONTACTS_PER_VACANT_ROW: usize = 16;
+/// See [`CONTACTS_PER_VACANT_ROW`].
+const VACANT_ROWS_MIN: usize = 8;
+/// A region keeps up to this many times its share of vacant rows through a sort (the
+/// rows of contacts it ended), so that a region whose contacts come and go in turn does
+/// not have rows despawned at one sort and spawned at the next.
+const VACANT_ROWS_KEPT: usize = 2;
+
+/// Before a sort: gives each region of each law's table its share of vacant rows
+/// ([`CONTACTS_PER_VACANT_ROW`]): a region short of it gets new vacant rows, spread over
+/// its grains; one with more than [`VACANT_ROWS_KEPT`] times it has the rest despawned, so
+/// that a packing whose contacts grow fewer does not keep the rows of its past. The sort
+/// that follows puts every row, old or new, in its region's place.
+fn fit_vacant_rows(
+    world: &mut World,
+    index: &mut ContactIndex,
+    table: &ContactLawTable,
+    s: &GrainSnapshot,
+    regions: &GrainRegions,
+) {
+    if !index.vacant_known {
+        index.vacant = find_vacant_rows(world, s, regions);
+        index.vacant_known = true;
+    }
+    if s.is_empty() {
+        return;
+    }
+    // Contacts of each law's archetype, by region.
+    let mut counts: Vec<(ArchetypeId, Vec<usize>)> = Vec::new();
+    let mut contacts = world.query::<(Entity, &Contact, &ContactBodies)>();
+    let contacts = contacts.query(world);
+    for (entities, c, b) in contacts.contiguous_iter().expect("contact query is dense") {
+        let Some(&first) = entities.first() else {
+            continue;
+        };
+        let mut per_region = vec![0usize; regions.count()];
+        for (c, b) in c.iter().zip(b) {
+            let key = key_grain(s, c, b);
+            if !c.is_vacant() && key != u32::MAX {
+                per_region[regions.region_of(key)] += 1;
+            }
+        }
+        counts.push((world.entity(first).location().archetype_id, per_region));
+    }
+    let mut removals: Vec<(usize, Entity)> = Vec::new();
+    let mut spawns: Vec<(&LawSlot, u32)> = Vec::new();
+    for (archetype, per_region) in &counts {
+        let Some(slot) = table
+            .slots
+            .iter()
+            .flatten()
+            .find(|slot| slot.archetype == *archetype)
+        else {
+            continue;
+        };
+        // This archetype's vacant rows, by region (the list is by archetype, region, row).
+        let first = index.vacant.partition_point(|v| v.0 < *archetype);
+        let end = index.vacant.partition_point(|v| v.0 <= *archetype);
+        let mut vacant = index.vacant[first..end].iter().peekable();
+        for (region, &contacts) in per_region.iter().enumerate() {
+            let mut held = Vec::new();
+            while let Some(v) = vacant.next_if(|v| v.1 as usize <= region) {
+                if v.1 as usize == region {
+                    held.push(v);
+                } else {
+                    removals.push((v.2, v.3));
+                }
+            }
+            let share = VACANT_ROWS_MIN.max(contacts / CONTACTS_PER_VACANT_ROW);
+            // The region's last rows go.
+            removals.extend(
+                held.iter()
+                    .skip(VACANT_ROWS_KEPT * share)
+                    .map(|v| (v.2, v.3)),
+            );
+            // New rows spread over the region's grains, so that each sorts among theirs.
+            let grains = regions.range(region);
+            let missing = share.saturating_sub(held.len());
+            if missing > 0 && !grains.is_empty() {
+                let step = grains.len() as f64 / missing as f64;
+                spawns.extend((0..missing).map(|k| {
+                    let grain = grains.start + (k as f64 * step) as usize;
+                    (slot, grain.min(grains.end - 1) as u32)
+                }));
+            }
+        }
+        // Rows of regions past the last (a body not found) go too.
+        removals.extend(vacant.map(|v| (v.2, v.3)));
+    }
+    if removals.is_empty() && spawns.is_empty() {
+        return;
+    }
+    removals.sort_unstable_by_key(|&(row, _)| std::cmp::Reverse(row));
+    for &(_, c) in &removals {
+        world.despawn(c);
+    }
+    for (slot, key) in spawns {
+        let bodies = ContactBodies {
+            a: key,
+            b: key,
+            layout: s.layout,
+        };
+        (slot.spawn)(world, Contact::vacant(s.entity[key as usize]), bodies);
+    }
+    index.vacant_known = false;
 }
 
 /// The contacts of one archetype that ended in a pass, as ranges of the pass's ended list
@@ -589,7 +822,8 @@ struct Reusable {
     /// The ended contacts handed out, with their table rows, their new pairs and the
     /// pairs' bodies.
     reuses: Vec<(Entity, usize, Contact, ContactBodies)>,
-    /// The law's recycling function, once a contact is handed out.
+    /// The recycling function of the archetype's law (`None` for a table no law spawns,
+    /// whose ended contacts are despawned).
     recycle: Option<RecycleContacts>,
 }
 
@@ -631,6 +865,8 @@ pub fn sort_contacts(world: &mut World, index: &mut ContactIndex, s: &GrainSnaps
     if moved == 0 {
         return 0;
     }
+    // The vacant rows moved with the rest.
+    index.vacant_known = false;
     // A sorted law's every contact has its bodies in `s`'s layout; an unsorted law's
     // contacts did not move, and any whose bodies are of another layout is skipped.
     let mut contacts = world.query::<(Entity, &ContactBodies)>();

@@ -26,6 +26,29 @@ pub struct Contact {
     pub pair_slot: u32,
 }
 
+impl Contact {
+    /// A vacant row of its law's table: no pair, but a row kept for the next new contact
+    /// of its grain's region (`a` and `b` are both that grain; no contact joins a grain to
+    /// itself). It carries no force, evaluates to nothing, and is neither listed in the
+    /// narrow phase's index nor counted, drawn or sampled; a saved state keeps it, so that
+    /// a resumed run hands rows out alike. See `docs/architecture.md` §6.
+    #[inline]
+    pub fn is_vacant(&self) -> bool {
+        self.a == self.b
+    }
+
+    /// The vacant row of grain `grain` (its key, whose region it stands in).
+    #[inline]
+    pub fn vacant(grain: Entity) -> Self {
+        Self {
+            a: grain,
+            b: grain,
+            kind: ContactKind::GrainGrain,
+            pair_slot: 0,
+        }
+    }
+}
+
 /// Where a contact's bodies sit in this step's [`talus_core::snapshot::GrainSnapshot`],
 /// written by the force loop: the summation of contact forces onto grains reads these
 /// instead of looking the entities up again.
@@ -71,6 +94,13 @@ impl ContactBodies {
     #[inline]
     pub fn wall_of(code: u32) -> Option<usize> {
         (code >= WALL_BODY_BASE).then(|| (code - WALL_BODY_BASE) as usize)
+    }
+
+    /// Whether these are the bodies of a vacant row ([`Contact::is_vacant`]): one grain
+    /// twice.
+    #[inline]
+    pub fn is_vacant(&self) -> bool {
+        self.a == self.b
     }
 
     /// The index of `b` among the snapshot's walls if it is a wall.
@@ -150,6 +180,8 @@ pub struct ContactEnergySums {
     pub integration_error: f64,
     /// How many of these contacts carry a force ([`ContactForce::is_active`]).
     pub active: usize,
+    /// How many of these rows are vacant ([`Contact::is_vacant`]).
+    pub vacant: usize,
     /// The largest overlap over the smaller radius of the pair among these contacts, and
     /// the first pair (a, b) that reached it; zero and `None` if no contact overlaps.
     pub worst_overlap: (f64, Option<(Entity, Entity)>),
@@ -167,6 +199,7 @@ impl ContactEnergySums {
         self.boundary_work += later.boundary_work;
         self.integration_error += later.integration_error;
         self.active += later.active;
+        self.vacant += later.vacant;
         if later.worst_overlap.0 > self.worst_overlap.0 {
             self.worst_overlap = later.worst_overlap;
         }

@@ -173,6 +173,17 @@ pub fn evaluate_law<L: ContactLaw>(
                     indices: &mut ContactBodies,
                     sums: &mut ContactEnergySums,
                     book: bool| {
+        if c.is_vacant() {
+            // A row kept for a new contact: nothing acts. Its bodies follow the grains'
+            // order, which places it in its grain's region at the next sort.
+            if indices.layout != snapshot.layout
+                && let Some(fresh) = ContactBodies::look_up(snapshot, c)
+            {
+                *indices = fresh;
+            }
+            sums.vacant += 1;
+            return;
+        }
         let Bodies {
             mut kin,
             omega_a,
@@ -364,11 +375,11 @@ fn evaluate_chunk<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: bo
         );
     }
     // The contacts that carried no force: the few the next narrow phase may end. (Every
-    // contact is counted in `sums.active` or listed here.)
+    // row is counted in `sums.active` or `sums.vacant`, or listed here.)
     let mut idle = Vec::new();
-    if sums.active < n {
+    if sums.active + sums.vacant < n {
         for (g, (f, d)) in g.iter().zip(f.iter().zip(d.iter())) {
-            if !f.is_active(g) {
+            if !f.is_active(g) && !d.is_vacant() {
                 idle.push([d.a, d.b]);
             }
         }
@@ -572,7 +583,9 @@ fn evaluate_four<L: ContactLaw, F: ScalarEvaluation<L::History>, const BOOK: boo
     let s = form.snapshot;
     let mut valid = 0u32;
     for k in 0..4 {
-        let current = c[k].kind == ContactKind::GrainGrain && d[k].layout == s.layout;
+        // A vacant row's bodies are one grain twice: the scalar path passes it over.
+        let current =
+            c[k].kind == ContactKind::GrainGrain && d[k].layout == s.layout && d[k].a != d[k].b;
         valid |= u32::from(current) << k;
     }
     // Lanes left out read grain 0 (there is one: these contacts have grains).
@@ -827,6 +840,7 @@ pub fn apply_contact_forces(
         integration_error,
         active: count,
         worst_overlap: (worst, worst_pair),
+        vacant: _,
     } = step;
     for (total, d) in ledger.dissipated.iter_mut().zip(dissipated.iter()) {
         *total += d;

@@ -84,7 +84,9 @@ pub struct SavedContact {
     pub law: String,
     /// First body: a grain, by index in [`SavedState::grains`].
     pub a: u32,
-    /// Second body.
+    /// Second body; grain `a` itself for a vacant row of the law's table (a row kept for
+    /// the next new contact of `a`'s region, [`Contact::is_vacant`]), which a resumed run
+    /// needs to hand rows out as the saved run would.
     pub b: SavedBody,
     /// Unit normal of the last evaluation (from `b` towards `a`).
     pub normal: DVec3,
@@ -256,17 +258,31 @@ pub fn restore_contacts(
                 (b, ContactKind::GrainWall, mat)
             }
         };
-        let Some(slot) = table.get(mat_a, mat_b) else {
+        let vacant = c.b == SavedBody::Grain(c.a);
+        let slot = if vacant {
+            // A vacant row (a grain paired with itself) of its law's table.
+            table
+                .slots
+                .iter()
+                .flatten()
+                .find(|slot| slot.law_type == c.law)
+        } else {
+            table
+                .get(mat_a, mat_b)
+                .filter(|slot| slot.law_type == c.law)
+        };
+        let Some(slot) = slot else {
             continue;
         };
-        if slot.law_type != c.law {
-            continue;
-        }
-        let contact = Contact {
-            a,
-            b,
-            kind,
-            pair_slot: slot.pair_slot,
+        let contact = if vacant {
+            Contact::vacant(a)
+        } else {
+            Contact {
+                a,
+                b,
+                kind,
+                pair_slot: slot.pair_slot,
+            }
         };
         let geometry = ContactGeometry {
             normal: c.normal,
@@ -279,6 +295,10 @@ pub fn restore_contacts(
         };
         let e = (slot.restore)(world, contact, geometry, force, &c.history)
             .map_err(|e| format!("contacts[{k}].history: {e}"))?;
+        if vacant {
+            // Not a contact: the narrow phase finds it among its table's vacant rows.
+            continue;
+        }
         world
             .resource_mut::<talus_collision::narrow::ContactIndex>()
             .register(a, b, e);
@@ -540,7 +560,18 @@ fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<
                     None => continue,
                 },
             };
-            let Some(slot) = table.get(mat_a, mat_b) else {
+            // A vacant row belongs to the law of its table, whatever its grain's material.
+            let slot = if c.is_vacant() {
+                let archetype = world.entity(e).location().archetype_id;
+                table
+                    .slots
+                    .iter()
+                    .flatten()
+                    .find(|slot| slot.archetype == archetype)
+            } else {
+                table.get(mat_a, mat_b)
+            };
+            let Some(slot) = slot else {
                 continue;
             };
             history.clear();
