@@ -608,12 +608,13 @@ fn update_contacts_inner(
             .find(|g| g.archetype == archetype && g.recycle.is_some());
         match group {
             Some(group) if keep_vacant && key != NO_KEY => {
+                let last = vacant_key(&regions, region as usize);
                 let bodies = ContactBodies {
-                    a: key,
-                    b: key,
+                    a: last,
+                    b: last,
                     layout: s.layout,
                 };
-                let grain = s.entity[key as usize];
+                let grain = s.entity[last as usize];
                 group.reuses.push((c, row, Contact::vacant(grain), bodies));
                 index.vacant.push((archetype, region, row, c));
             }
@@ -669,6 +670,15 @@ type EndedRow = (ArchetypeId, u32, usize, Entity, u32);
 /// The key of a row that was vacant before the pass.
 const VACANT_KEY: u32 = u32::MAX - 1;
 
+/// The grain a vacant row of `region` is given ([`Contact::vacant`]): the region's last, so
+/// that a sort puts the region's vacant rows together at the end of its rows (before the
+/// last grain's few contacts). Spread among the region's contacts they would leave a
+/// vacant lane in many of the force loop's groups of four (measured 5–7 % of the 32,000-grain
+/// chute's step with a vacant row per 16 contacts).
+fn vacant_key(regions: &GrainRegions, region: usize) -> u32 {
+    (regions.range(region).end - 1) as u32
+}
+
 /// The vacant rows of every contact table, by archetype, region of their grain and row.
 fn find_vacant_rows(
     world: &mut World,
@@ -700,20 +710,24 @@ fn find_vacant_rows(
 }
 
 /// The vacant rows a region is given at a sort: one per this many of its contacts, and
-/// [`VACANT_ROWS_MIN`] at the least. Between two sorts the contacts a region makes, less
-/// those it ends, take its vacant rows; once they are gone its new contacts land in other
-/// regions' rows (`docs/architecture.md` §6 has the measurements).
-const CONTACTS_PER_VACANT_ROW: usize = 16;
+/// [`VACANT_ROWS_MIN`] at the least; [`VACANT_ROWS_TAKEN`] times that for a region left
+/// with less than half of it. Between two sorts the contacts a region makes, less those it
+/// ends, take its vacant rows; once they are gone its new contacts land in other regions'
+/// rows. A share large enough everywhere for the regions that take most (one row per 16
+/// contacts) cost the 32,000-grain chute's step 3 % for the rows the others leave unused
+/// (`docs/architecture.md` §6 has the measurements).
+const CONTACTS_PER_VACANT_ROW: usize = 128;
 /// See [`CONTACTS_PER_VACANT_ROW`].
 const VACANT_ROWS_MIN: usize = 8;
+/// See [`CONTACTS_PER_VACANT_ROW`].
+const VACANT_ROWS_TAKEN: usize = 8;
 /// A region keeps up to this many times its share of vacant rows through a sort (the
 /// rows of contacts it ended), so that a region whose contacts come and go in turn does
 /// not have rows despawned at one sort and spawned at the next.
 const VACANT_ROWS_KEPT: usize = 2;
 
 /// Before a sort: gives each region of each law's table its share of vacant rows
-/// ([`CONTACTS_PER_VACANT_ROW`]): a region short of it gets new vacant rows, spread over
-/// its grains; one with more than [`VACANT_ROWS_KEPT`] times it has the rest despawned, so
+/// ([`CONTACTS_PER_VACANT_ROW`]): a region short of it gets new vacant rows; one with more than [`VACANT_ROWS_KEPT`] times it has the rest despawned, so
 /// that a packing whose contacts grow fewer does not keep the rows of its past. The sort
 /// that follows puts every row, old or new, in its region's place.
 fn fit_vacant_rows(
@@ -771,22 +785,24 @@ fn fit_vacant_rows(
                     removals.push((v.2, v.3));
                 }
             }
-            let share = VACANT_ROWS_MIN.max(contacts / CONTACTS_PER_VACANT_ROW);
+            // A region that used up most of its vacant rows since the last sort is given
+            // more: a fixed function of the table, so that a resumed run fits alike.
+            let floor = VACANT_ROWS_MIN.max(contacts / CONTACTS_PER_VACANT_ROW);
+            let share = if held.len() < floor / 2 {
+                VACANT_ROWS_TAKEN * floor
+            } else {
+                floor
+            };
             // The region's last rows go.
             removals.extend(
                 held.iter()
                     .skip(VACANT_ROWS_KEPT * share)
                     .map(|v| (v.2, v.3)),
             );
-            // New rows spread over the region's grains, so that each sorts among theirs.
-            let grains = regions.range(region);
             let missing = share.saturating_sub(held.len());
-            if missing > 0 && !grains.is_empty() {
-                let step = grains.len() as f64 / missing as f64;
-                spawns.extend((0..missing).map(|k| {
-                    let grain = grains.start + (k as f64 * step) as usize;
-                    (slot, grain.min(grains.end - 1) as u32)
-                }));
+            if missing > 0 && !regions.range(region).is_empty() {
+                let key = vacant_key(regions, region);
+                spawns.extend((0..missing).map(|_| (slot, key)));
             }
         }
         // Rows of regions past the last (a body not found) go too.

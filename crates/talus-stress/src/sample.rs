@@ -334,6 +334,10 @@ pub fn sample_stress(
     // Contacts.
     let mut torques_carried = false;
     for (c, g, f) in &contacts {
+        // A vacant row of a contact table holds no contact.
+        if c.is_vacant() {
+            continue;
+        }
         let Some(i) = snapshot.dense(c.a) else {
             continue;
         };
