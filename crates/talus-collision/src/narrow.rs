@@ -685,7 +685,20 @@ fn find_vacant_rows(
     s: &GrainSnapshot,
     regions: &GrainRegions,
 ) -> Vec<VacantRow> {
-    let mut found = Vec::new();
+    scan_contact_tables(world, s, regions, false).0
+}
+
+/// One pass over every contact table: its vacant rows (as [`find_vacant_rows`]) and, if
+/// `count`, its other contacts by region of their key grain, per archetype.
+#[allow(clippy::type_complexity)]
+fn scan_contact_tables(
+    world: &mut World,
+    s: &GrainSnapshot,
+    regions: &GrainRegions,
+    count: bool,
+) -> (Vec<VacantRow>, Vec<(ArchetypeId, Vec<usize>)>) {
+    let mut vacant = Vec::new();
+    let mut counts = Vec::new();
     let mut contacts = world.query::<(Entity, &Contact, &ContactBodies)>();
     let contacts = contacts.query(world);
     for (entities, c, b) in contacts.contiguous_iter().expect("contact query is dense") {
@@ -693,20 +706,26 @@ fn find_vacant_rows(
             continue;
         };
         let archetype = world.entity(first).location().archetype_id;
+        let mut per_region = vec![0usize; if count { regions.count() } else { 0 }];
         for (row, (c, b)) in c.iter().zip(b).enumerate() {
+            let key = key_grain(s, c, b);
+            let region = if key == u32::MAX {
+                u32::MAX
+            } else {
+                regions.region_of(key) as u32
+            };
             if c.is_vacant() {
-                let key = key_grain(s, c, b);
-                let region = if key == u32::MAX {
-                    u32::MAX
-                } else {
-                    regions.region_of(key) as u32
-                };
-                found.push((archetype, region, row, entities[row]));
+                vacant.push((archetype, region, row, entities[row]));
+            } else if count && key != u32::MAX {
+                per_region[region as usize] += 1;
             }
         }
+        if count {
+            counts.push((archetype, per_region));
+        }
     }
-    found.sort_unstable_by_key(|&(archetype, region, row, _)| (archetype, region, row));
-    found
+    vacant.sort_unstable_by_key(|&(archetype, region, row, _)| (archetype, region, row));
+    (vacant, counts)
 }
 
 /// The vacant rows a region is given at a sort: one per this many of its contacts, and
@@ -737,30 +756,13 @@ fn fit_vacant_rows(
     s: &GrainSnapshot,
     regions: &GrainRegions,
 ) {
-    if !index.vacant_known {
-        index.vacant = find_vacant_rows(world, s, regions);
-        index.vacant_known = true;
-    }
     if s.is_empty() {
         return;
     }
-    // Contacts of each law's archetype, by region.
-    let mut counts: Vec<(ArchetypeId, Vec<usize>)> = Vec::new();
-    let mut contacts = world.query::<(Entity, &Contact, &ContactBodies)>();
-    let contacts = contacts.query(world);
-    for (entities, c, b) in contacts.contiguous_iter().expect("contact query is dense") {
-        let Some(&first) = entities.first() else {
-            continue;
-        };
-        let mut per_region = vec![0usize; regions.count()];
-        for (c, b) in c.iter().zip(b) {
-            let key = key_grain(s, c, b);
-            if !c.is_vacant() && key != u32::MAX {
-                per_region[regions.region_of(key)] += 1;
-            }
-        }
-        counts.push((world.entity(first).location().archetype_id, per_region));
-    }
+    // Contacts of each law's archetype, by region, and the vacant rows as they are.
+    let (vacant, counts) = scan_contact_tables(world, s, regions, true);
+    index.vacant = vacant;
+    index.vacant_known = true;
     let mut removals: Vec<(usize, Entity)> = Vec::new();
     let mut spawns: Vec<(&LawSlot, u32)> = Vec::new();
     for (archetype, per_region) in &counts {
