@@ -188,11 +188,6 @@ impl ContactIndex {
         self.vacant_known = false;
     }
 
-    /// Number of vacant rows in the contact tables (as of the last narrow phase).
-    pub fn vacant_rows(&self) -> usize {
-        self.vacant.len()
-    }
-
     /// Keys the index by the snapshot's order of grains and walls (re-keying it from each
     /// contact's bodies if the order changed) and enters the pending contacts. Adds to `orphans` the
     /// contacts one of whose bodies is no longer in the snapshot.
@@ -591,7 +586,7 @@ fn update_contacts_inner(
             None => to_spawn.push((i, j, slot, pair, law)),
         }
     }
-    // The ended contacts no pair took become vacant rows of their grains (in the same call
+    // The ended contacts no pair took become vacant rows of their regions (in the same call
     // that writes the handed-out ones); those whose grain is not known (a body is gone)
     // are despawned, as are all of them when rows are not kept.
     let mut removals: Vec<(usize, Entity)> = Vec::new();
