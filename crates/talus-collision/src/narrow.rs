@@ -466,12 +466,7 @@ fn update_contacts_inner(
                         by_region: Vec::new(),
                         spare: 0,
                         reuses: Vec::new(),
-                        recycle: table
-                            .slots
-                            .iter()
-                            .flatten()
-                            .find(|slot| slot.archetype == archetype)
-                            .map(|slot| slot.recycle),
+                        recycle: table.by_archetype(archetype).map(|slot| slot.recycle),
                     });
                     reusable.last_mut().expect("just pushed")
                 }
@@ -506,12 +501,10 @@ fn update_contacts_inner(
                         live: &mut [Vec<u64>],
                         group: &mut Reusable,
                         k: usize,
-                        (i, j, slot, pair): (u32, u32, u32, Contact),
-                        law: &LawSlot| {
+                        (i, j, slot, pair): (u32, u32, u32, Contact)| {
         let (_, _, row, contact, _) = ended_at[k];
         reused[k] = true;
         group.reuses.push((contact, row, pair, bodies_of(i, j)));
-        group.recycle = Some(law.recycle);
         per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
         set_live(live, i as usize, slot, true);
     };
@@ -557,7 +550,7 @@ fn update_contacts_inner(
             Some(at) => {
                 let k = group.by_region[at].next;
                 group.by_region[at].next += 1;
-                hand_out(per_grain, live, group, k, (i, j, slot, pair), law);
+                hand_out(per_grain, live, group, k, (i, j, slot, pair));
             }
             None => unplaced.push((i, j, slot, pair, law)),
         }
@@ -581,7 +574,7 @@ fn update_contacts_inner(
             Some(run) => {
                 let k = run.next;
                 run.next += 1;
-                hand_out(per_grain, live, group, k, (i, j, slot, pair), law);
+                hand_out(per_grain, live, group, k, (i, j, slot, pair));
             }
             None => to_spawn.push((i, j, slot, pair, law)),
         }
@@ -741,9 +734,10 @@ const VACANT_ROWS_TAKEN: usize = 8;
 const VACANT_ROWS_KEPT: usize = 2;
 
 /// Before a sort: gives each region of each law's table its share of vacant rows
-/// ([`CONTACTS_PER_VACANT_ROW`]): a region short of it gets new vacant rows; one with more than [`VACANT_ROWS_KEPT`] times it has the rest despawned, so
-/// that a packing whose contacts grow fewer does not keep the rows of its past. The sort
-/// that follows puts every row, old or new, in its region's place.
+/// ([`CONTACTS_PER_VACANT_ROW`]): a region short of it gets new vacant rows; one with more
+/// than [`VACANT_ROWS_KEPT`] times it has the rest despawned, so that a packing whose
+/// contacts grow fewer does not keep the rows of its past. The sort that follows puts every
+/// row, old or new, in its region's place.
 fn fit_vacant_rows(
     world: &mut World,
     index: &mut ContactIndex,
@@ -761,12 +755,7 @@ fn fit_vacant_rows(
     let mut removals: Vec<(usize, Entity)> = Vec::new();
     let mut spawns: Vec<(&LawSlot, u32)> = Vec::new();
     for (archetype, per_region) in &counts {
-        let Some(slot) = table
-            .slots
-            .iter()
-            .flatten()
-            .find(|slot| slot.archetype == *archetype)
-        else {
+        let Some(slot) = table.by_archetype(*archetype) else {
             continue;
         };
         // This archetype's vacant rows, by region (the list is by archetype, region, row).

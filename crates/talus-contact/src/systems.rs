@@ -102,6 +102,15 @@ impl ContactLawTable {
             .get(a as usize * self.n_materials + b as usize)
             .and_then(|s| s.as_ref())
     }
+
+    /// The slot of the law whose contacts make up `archetype` (any of its material pairs:
+    /// they share the law's spawn, recycling and history functions).
+    pub fn by_archetype(&self, archetype: bevy_ecs::archetype::ArchetypeId) -> Option<&LawSlot> {
+        self.slots
+            .iter()
+            .flatten()
+            .find(|slot| slot.archetype == archetype)
+    }
 }
 
 /// Installs the contact bookkeeping: the law table and the systems that apply contact

@@ -562,12 +562,7 @@ fn encode_state(world: &mut World, scene: &str, out: &mut impl Write) -> Result<
             };
             // A vacant row belongs to the law of its table, whatever its grain's material.
             let slot = if c.is_vacant() {
-                let archetype = world.entity(e).location().archetype_id;
-                table
-                    .slots
-                    .iter()
-                    .flatten()
-                    .find(|slot| slot.archetype == archetype)
+                table.by_archetype(world.entity(e).location().archetype_id)
             } else {
                 table.get(mat_a, mat_b)
             };
