@@ -53,7 +53,7 @@ mod packing;
 mod periodic;
 mod pour_energy_balance;
 mod recording;
-mod region_force_loop;
+mod region_stages;
 mod rest;
 mod rolling_friction;
 mod rolling_resistance;

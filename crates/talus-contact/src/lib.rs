@@ -32,4 +32,4 @@ pub use kinematics::{ContactKinematics, ContactKinematicsLanes, SpinLanes};
 pub use law::*;
 pub use order::{ContactTableSort, ContactTableSorts};
 pub use params::*;
-pub use systems::{ContactPlugin, LaneForms, RegionForceLoop, unbalanced_force_ratio};
+pub use systems::{ContactPlugin, LaneForms, RegionStages, unbalanced_force_ratio};

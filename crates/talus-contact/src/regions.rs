@@ -6,10 +6,12 @@
 //! holds a few runs. One pass over the contacts' keys finds the runs, a few hundred in a
 //! table of 16,000 contacts 19 steps after a sort; they are what is listed, not the rows.
 
+use std::ops::Range;
+
 use talus_core::regions::GrainRegions;
 use talus_core::snapshot::GrainSnapshot;
 
-use crate::components::{Contact, ContactBodies};
+use crate::components::{Contact, ContactBodies, WALL_BODY_BASE};
 
 /// A run of consecutive rows of a table, `[first, end)`.
 pub type RowRun = [u32; 2];
@@ -28,27 +30,43 @@ pub struct RegionRuns {
     pieces: Vec<RowRun>,
     /// Where each batch of [`Self::batch`] ends in `pieces`.
     batch_ends: Vec<u32>,
+    /// For each region, the lowest region whose rows touch one of its grains (the region
+    /// itself if no other's do).
+    first_touching: Vec<u32>,
 }
 
 impl RegionRuns {
     /// Lists the rows of a table (its contacts and their bodies, row by row) by the region
-    /// of each contact's key grain ([`key_grain`]) in snapshot `s`.
+    /// of each contact's key grain ([`key_grain`]) in snapshot `s`, and finds for each region
+    /// the lowest region whose rows touch its grains ([`Self::first_touching`]), leaving out
+    /// the grains of the `untracked` ranges of dense indices (frozen grains, which contacts
+    /// from anywhere in the packing touch: their force sums read every row).
     pub fn build(
         &mut self,
         regions: &GrainRegions,
         s: &GrainSnapshot,
         contacts: &[Contact],
         bodies: &[ContactBodies],
+        untracked: &[Range<u32>],
     ) {
         assert_eq!(contacts.len(), bodies.len(), "one body pair per contact");
         let n = u32::try_from(contacts.len()).expect("a contact table holds under 2^32 rows");
         // One pass finds the maximal runs of rows of one region (the region in a register:
         // a count per row in memory would chain every row's increment to the last's).
         self.found.clear();
+        let count = regions.count();
+        self.first_touching.clear();
+        self.first_touching.extend(0..count as u32);
         let mut current = (0u32, 0u32);
         for (row, d) in bodies.iter().enumerate() {
             // The contact itself is read only when its cached bodies are out of date.
-            let region = regions.region_of(key_grain(s, &contacts[row], d)) as u32;
+            let (key, other) = key_and_other_grain(s, &contacts[row], d);
+            let region = regions.region_of(key) as u32;
+            let other_region = regions.region_of(other);
+            if other_region as u32 > region && !untracked.iter().any(|u| u.contains(&other)) {
+                let first = &mut self.first_touching[other_region];
+                *first = (*first).min(region);
+            }
             if region != current.0 {
                 if row as u32 > current.1 {
                     self.found.push((current.0, [current.1, row as u32]));
@@ -60,7 +78,6 @@ impl RegionRuns {
             self.found.push((current.0, [current.1, n]));
         }
         // The runs by region, in table order within each (a counting sort of the runs).
-        let count = regions.count();
         self.offsets.clear();
         self.offsets.resize(count + 1, 0);
         for &(region, _) in &self.found {
@@ -93,6 +110,25 @@ impl RegionRuns {
     /// Every run, region after region.
     pub fn all(&self) -> &[RowRun] {
         &self.runs
+    }
+
+    /// The lowest region whose rows touch a grain of region `r` (at most `r`: a row
+    /// belongs to the region of its lower grain), its untracked grains left out.
+    pub fn first_touching(&self, r: usize) -> usize {
+        self.first_touching[r] as usize
+    }
+
+    /// Sets `out` to every run of rows that touches a grain of region `r` (the runs of
+    /// regions [`Self::first_touching`]`(r)..=r`; untracked grains left out), from the last
+    /// row to the first: the rows whose forces a grain of `r` sums, in the order the force
+    /// sums take them.
+    pub fn touching_runs_descending(&self, r: usize, out: &mut Vec<RowRun>) {
+        let first = self.offsets[self.first_touching(r)] as usize;
+        let end = self.offsets[r + 1] as usize;
+        out.clear();
+        out.extend_from_slice(&self.runs[first..end]);
+        // Runs are disjoint: ordered by their first rows, they are ordered by every row.
+        out.sort_unstable_by_key(|&[first, _]| std::cmp::Reverse(first));
     }
 
     /// Cuts the runs, region after region, into batches of at most `max_rows` rows (a run
@@ -136,16 +172,26 @@ impl RegionRuns {
 /// up otherwise; `u32::MAX` if a body is missing from the snapshot.
 #[inline]
 pub fn key_grain(s: &GrainSnapshot, c: &Contact, cached: &ContactBodies) -> u32 {
+    key_and_other_grain(s, c, cached).0
+}
+
+/// A contact's key grain ([`key_grain`]) and its other grain: the second of its two
+/// grains in dense order, or the key again for a grain and a wall (and for a vacant row,
+/// whose grains are one).
+#[inline]
+pub fn key_and_other_grain(s: &GrainSnapshot, c: &Contact, cached: &ContactBodies) -> (u32, u32) {
     let bodies = if cached.layout == s.layout {
         *cached
     } else {
         match ContactBodies::look_up(s, c) {
             Some(bodies) => bodies,
-            None => return u32::MAX,
+            None => return (u32::MAX, u32::MAX),
         }
     };
     // A wall's code is above every dense index: the smaller code is the grain.
-    bodies.a.min(bodies.b)
+    let key = bodies.a.min(bodies.b);
+    let other = bodies.a.max(bodies.b);
+    (key, if other >= WALL_BODY_BASE { key } else { other })
 }
 
 #[cfg(test)]
@@ -168,7 +214,12 @@ mod tests {
         };
         let mut runs = RegionRuns::default();
         // The later tables reuse the first one's lists.
-        for (contacts, grains, region_len) in [(500, 100, 16), (37, 100, 1000), (300, 50, 1)] {
+        // The last grains of the first table are untracked (as frozen grains are).
+        for (contacts, grains, region_len, untracked) in [
+            (500, 100, 16, 90..100),
+            (37, 100, 1000, 0..0),
+            (300, 50, 1, 0..0),
+        ] {
             let regions = GrainRegions::new(grains, region_len);
             // Keys in ascending runs, as a table between sorts has them, some out of place.
             let bodies: Vec<ContactBodies> = (0..contacts)
@@ -195,8 +246,32 @@ mod tests {
                 };
                 contacts
             ];
-            runs.build(&regions, &s, &pairs, &bodies);
+            runs.build(
+                &regions,
+                &s,
+                &pairs,
+                &bodies,
+                std::slice::from_ref(&untracked),
+            );
             assert_eq!(runs.count(), regions.count());
+            if !untracked.is_empty() {
+                // A region of untracked grains alone is touched by no other's rows.
+                let last = regions.count() - 1;
+                assert!(untracked.start as usize <= regions.range(last).start);
+                assert_eq!(runs.first_touching(last), last);
+                runs.build(&regions, &s, &pairs, &bodies, &[]);
+                assert!(
+                    runs.first_touching(last) < last,
+                    "untracked grains left out"
+                );
+                runs.build(
+                    &regions,
+                    &s,
+                    &pairs,
+                    &bodies,
+                    std::slice::from_ref(&untracked),
+                );
+            }
             let mut seen = vec![false; contacts];
             for r in 0..runs.count() {
                 let list = runs.region(r);
@@ -219,6 +294,29 @@ mod tests {
                 }
             }
             assert!(seen.iter().all(|&s| s), "every row listed");
+            // The rows touching each region's grains, from the last row to the first.
+            let mut touching = Vec::new();
+            for r in 0..runs.count() {
+                runs.touching_runs_descending(r, &mut touching);
+                assert!(runs.first_touching(r) <= r);
+                assert!(
+                    touching.windows(2).all(|w| w[1][1] <= w[0][0]),
+                    "region {r}: apart, descending"
+                );
+                let listed = |row: usize| {
+                    touching
+                        .iter()
+                        .any(|&[first, end]| (first as usize..end as usize).contains(&row))
+                };
+                let grains = regions.range(r);
+                for (row, d) in bodies.iter().enumerate() {
+                    let tracked = |grain: u32| {
+                        grains.contains(&(grain as usize)) && !untracked.contains(&grain)
+                    };
+                    let touches = tracked(d.a) || (d.wall_b().is_none() && tracked(d.b));
+                    assert!(!touches || listed(row), "region {r}: row {row} left out");
+                }
+            }
             // Maximal: a run's neighbouring rows in the table belong to other regions.
             let region_of_row = |row: u32| {
                 let d = bodies[row as usize];

@@ -31,15 +31,20 @@ const FORCE_CHUNKS_PER_JOB: usize = 1;
 /// would give its new pair (with the pair's bodies).
 pub type RecycleContacts = fn(&mut World, &[(Entity, usize, Contact, ContactBodies)]);
 
-/// Present: the force loops of steps whose energies are not booked
-/// ([`ContactEnergyBooking`]) evaluate each law's contacts region by region, in regions of
-/// `region_grains` grains ([`talus_core::regions`]; each region's rows listed by
-/// [`RegionRuns`]), instead of in table order. Each contact's results are the same bits
-/// either way (a contact's evaluation reads nothing another writes); only the order in
-/// which the contacts' counts are added changes, and which of two pairs with exactly the
-/// same worst overlap is named.
+/// Present: stages of a step run region by region ([`talus_core::regions`], regions of
+/// `region_grains` grains), as the wave front through the packing will
+/// (`docs/architecture.md` §11), each with the results of its whole-stage form:
+/// - the force loops of steps whose energies are not booked ([`ContactEnergyBooking`])
+///   evaluate each law's contacts region by region (each region's rows listed by
+///   [`RegionRuns`]) instead of in table order. Each contact's results are the same bits
+///   either way (a contact's evaluation reads nothing another writes); only the order in
+///   which the contacts' counts are added changes, and which of two pairs with exactly the
+///   same worst overlap is named;
+/// - the force sums set each region's grains' totals from the rows that touch them
+///   ([`RegionRuns::touching_runs_descending`]) instead of from every row: each grain
+///   receives the same forces in the same order, so its totals are the same bits.
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
-pub struct RegionForceLoop {
+pub struct RegionStages {
     /// Grains per region ([`talus_core::regions::REGION_GRAINS`] is the size the stages
     /// are measured with).
     pub region_grains: usize,
@@ -156,7 +161,7 @@ pub fn evaluate_law<L: ContactLaw>(
     channels: Res<LawChannels<L>>,
     booking: Option<Res<ContactEnergyBooking>>,
     lane_forms: Option<Res<LaneForms>>,
-    region_loop: Option<Res<RegionForceLoop>>,
+    region_loop: Option<Res<RegionStages>>,
     mut partials: ResMut<ContactEnergyPartials>,
     mut idle: ResMut<IdleContacts>,
     mut region_runs: Local<RegionRuns>,
@@ -282,7 +287,7 @@ pub fn evaluate_law<L: ContactLaw>(
         // An indexed parallel iterator extends the list in chunk order.
         outcomes.clear();
         if let Some(regions) = &regions {
-            region_runs.build(regions, snapshot, c, d);
+            region_runs.build(regions, snapshot, c, d, &[]);
             let batches = region_runs.make_batches(ENERGY_CHUNK_LEN);
             let columns = TableColumns::new(c, h, g, f, d);
             let (columns, runs) = (&columns, &*region_runs);
@@ -776,7 +781,7 @@ type GrainTotals<'w, 's> = Query<
 >;
 
 /// The frozen grains, to tell their tables apart.
-type FrozenGrains<'w, 's> = Query<'w, 's, (), (With<Grain>, With<Frozen>)>;
+type FrozenGrains<'w, 's> = Query<'w, 's, Entity, (With<Grain>, With<Frozen>)>;
 
 /// Sums contact forces and torques onto grains (overwriting last step's totals, the forces starting
 /// from the grains' weights: [`SimBuilder::gravity_in_force_sums`]) and walls, and the contact
@@ -795,10 +800,11 @@ pub fn apply_contact_forces(
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
     mut partials: ResMut<ContactEnergyPartials>,
-    contacts: Query<(&ContactBodies, &ContactForce)>,
+    contacts: Query<(&Contact, &ContactBodies, &ContactForce)>,
     (mut grains, frozen): (GrainTotals, FrozenGrains),
     mut walls: Query<(Entity, &mut WallLoad)>,
     (config, mut frozen_totals): (Res<SimConfig>, ResMut<FrozenTotals>),
+    (region_stages, mut region_runs): (Option<Res<RegionStages>>, Local<Vec<RegionRuns>>),
     mut wall_force: Local<Vec<DVec3>>,
     mut picked: Local<Vec<Vec<u32>>>,
 ) {
@@ -807,10 +813,29 @@ pub fn apply_contact_forces(
     if ledger.dissipated.len() < channels.names.len() {
         ledger.dissipated.resize(channels.names.len(), 0.0);
     }
-    let tables: Vec<(&[ContactBodies], &[ContactForce])> = contacts
+    let full_tables: Vec<(&[Contact], &[ContactBodies], &[ContactForce])> = contacts
         .contiguous_iter()
         .expect("contact query is dense")
         .collect();
+    let tables: Vec<(&[ContactBodies], &[ContactForce])> =
+        full_tables.iter().map(|&(_, d, f)| (d, f)).collect();
+    let regions = region_stages.map(|on| GrainRegions::new(snapshot.len(), on.region_grains));
+    if let Some(regions) = &regions {
+        // The frozen grains' totals are summed from every row (`sum_grain_totals`).
+        let frozen_ranges: Vec<std::ops::Range<u32>> = frozen
+            .contiguous_iter()
+            .expect("grain query is dense")
+            .filter_map(|entities| {
+                let first = snapshot.dense(*entities.first()?)? as u32;
+                Some(first..first + entities.len() as u32)
+            })
+            .collect();
+        region_runs.resize_with(tables.len(), RegionRuns::default);
+        for (&(c, d, _), runs) in full_tables.iter().zip(region_runs.iter_mut()) {
+            runs.build(regions, &snapshot, c, d, &frozen_ranges);
+        }
+    }
+    let by_region = regions.as_ref().map(|regions| (regions, &region_runs[..]));
     let leave_frozen = frozen_totals.leave_this_step && clock.pass_dt != 0.0;
     let which = if leave_frozen {
         TotalsOf::Moving
@@ -820,6 +845,7 @@ pub fn apply_contact_forces(
     let left = sum_grain_totals(
         &snapshot,
         &tables,
+        by_region,
         &mut grains,
         &frozen,
         which,
@@ -886,9 +912,16 @@ enum TotalsOf {
     Frozen,
 }
 
-/// One thread's range of [`sum_grain_totals`]: its first grain's dense index, and the
-/// range's force and torque totals and masses.
-type SumPart<'a> = (usize, &'a mut [Force], &'a mut [Torque], &'a [Mass]);
+/// One range of grains of [`sum_grain_totals`] (a thread's, or a region's): its first
+/// grain's dense index, the range's force and torque totals and masses, and its region
+/// when the sums go region by region.
+type SumPart<'a> = (
+    usize,
+    &'a mut [Force],
+    &'a mut [Torque],
+    &'a [Mass],
+    Option<usize>,
+);
 
 /// Sets the force and torque totals of the grains `which` names from the contact tables
 /// (see [`sum_range`]); returns whether it left a table of frozen grains out.
@@ -900,9 +933,17 @@ type SumPart<'a> = (usize, &'a mut [Force], &'a mut [Torque], &'a [Mass]);
 /// and adds the forces of those that touch it. Each grain table is a share of its own and each
 /// share reads every contact, so a table left out (the frozen base of a chute) spares a whole pass
 /// over the contacts.
+///
+/// With `by_region` (the regions and each table's rows listed by region, [`RegionStages`],
+/// frozen grains untracked) the moving grains' ranges are the regions' grains instead, and
+/// each reads only the rows that touch them ([`RegionRuns::touching_runs_descending`]),
+/// from the last to the first as the whole scan does: the same additions in the same
+/// order.
+#[allow(clippy::too_many_arguments)]
 fn sum_grain_totals(
     snapshot: &GrainSnapshot,
     tables: &[(&[ContactBodies], &[ContactForce])],
+    by_region: Option<(&GrainRegions, &[RegionRuns])>,
     grains: &mut GrainTotals,
     frozen: &FrozenGrains,
     which: TotalsOf,
@@ -928,12 +969,29 @@ fn sum_grain_totals(
         if wanted {
             let f = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(f).0;
             let t = bevy_ecs::change_detection::ContiguousMut::bypass_change_detection_split(t).0;
-            let shares = f
-                .chunks_mut(range)
-                .zip(t.chunks_mut(range))
-                .zip(m.chunks(range));
-            for (k, ((f, t), m)) in shares.enumerate() {
-                parts.push((offset + k * range, f, t, m));
+            if let Some((regions, _)) = by_region
+                && !is_frozen
+            {
+                // The table's grains cut where the regions are (frozen grains are touched
+                // from anywhere in the packing: their shares read every row, below).
+                let (mut f, mut t, mut m, mut at) = (f, t, m, offset);
+                while !f.is_empty() {
+                    let region = regions.region_of(at as u32);
+                    let piece = (regions.range(region).end - at).min(f.len());
+                    let (f_here, f_rest) = f.split_at_mut(piece);
+                    let (t_here, t_rest) = t.split_at_mut(piece);
+                    let (m_here, m_rest) = m.split_at(piece);
+                    parts.push((at, f_here, t_here, m_here, Some(region)));
+                    (f, t, m, at) = (f_rest, t_rest, m_rest, at + piece);
+                }
+            } else {
+                let shares = f
+                    .chunks_mut(range)
+                    .zip(t.chunks_mut(range))
+                    .zip(m.chunks(range));
+                for (k, ((f, t), m)) in shares.enumerate() {
+                    parts.push((offset + k * range, f, t, m, None));
+                }
             }
         }
         offset += len;
@@ -941,8 +999,22 @@ fn sum_grain_totals(
     picked.resize_with(parts.len(), Vec::new);
     let pick = rayon::current_num_threads() > 1;
     parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
-        |((first, force, torque, mass), picked)| {
-            sum_range(tables, pick, first, force, torque, mass, g, picked)
+        |((first, force, torque, mass, region), picked)| match (region, by_region) {
+            (Some(r), Some((_, runs))) => {
+                // A region's rows are read by the regions whose grains they touch: most
+                // of the sides they hold lie outside the range, so they are picked.
+                let touching: Vec<Vec<RowRun>> = runs
+                    .iter()
+                    .map(|runs| {
+                        let mut touching = Vec::new();
+                        runs.touching_runs_descending(r, &mut touching);
+                        touching
+                    })
+                    .collect();
+                let rows = Some(&touching[..]);
+                sum_range(tables, rows, true, first, force, torque, mass, g, picked)
+            }
+            _ => sum_range(tables, None, pick, first, force, torque, mass, g, picked),
         },
     );
     left_frozen
@@ -982,6 +1054,7 @@ fn sum_frozen_totals(
     sum_grain_totals(
         &snapshot,
         &tables,
+        None,
         &mut grains,
         &frozen,
         TotalsOf::Frozen,
@@ -1001,6 +1074,10 @@ fn sum_frozen_totals(
 /// step's kick reads (measured against a forward scan by switching between the two every
 /// few steps inside one run: 2–4 % faster on 2 threads at every size, no faster on 1
 /// thread; `docs/performance-log.md`, session 41).
+///
+/// With `rows` (one list per table, each from its last row to its first: a region's rows,
+/// [`RegionRuns::touching_runs_descending`]) only those rows are scanned, in that order,
+/// and always by picking.
 ///
 /// With `pick` (two or more threads), every contact's two bodies are first tested against
 /// the range without a branch, each side in range appended to `picked` as
@@ -1025,6 +1102,7 @@ fn sum_frozen_totals(
 #[allow(clippy::too_many_arguments)]
 fn sum_range(
     tables: &[(&[ContactBodies], &[ContactForce])],
+    rows: Option<&[Vec<RowRun>]>,
     pick: bool,
     first: usize,
     force: &mut [Force],
@@ -1071,7 +1149,8 @@ fn sum_range(
         let k = (body as usize).wrapping_sub(first);
         if k < len { k } else { usize::MAX }
     };
-    if !pick {
+    // Listed rows are taken by picking.
+    if !pick && rows.is_none() {
         for &(bodies, forces) in tables.iter().rev() {
             for (block, rows) in bodies.chunks(START_BLOCK).enumerate().rev() {
                 if set_from > 0 {
@@ -1110,7 +1189,18 @@ fn sum_range(
     // Two entries a contact at most, plus the one written past the last kept; blocks of
     // contacts keep the list small (no buffer that grows with the packing) and in cache.
     picked.resize(2 * PICK_BLOCK + 1, 0);
-    for &(bodies, forces) in tables.iter().rev() {
+    // The rows to scan, as slices in the order they are scanned (each from its end).
+    let mut pieces: Vec<(&[ContactBodies], &[ContactForce])> = Vec::new();
+    for (t, &(bodies, forces)) in tables.iter().enumerate().rev() {
+        match rows {
+            Some(rows) => pieces.extend(rows[t].iter().map(|&[first, end]| {
+                let rows = first as usize..end as usize;
+                (&bodies[rows.clone()], &forces[rows])
+            })),
+            None => pieces.push((bodies, forces)),
+        }
+    }
+    for (bodies, forces) in pieces {
         let blocks = bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK));
         for (bodies, forces) in blocks.rev() {
             let mut count = 0;
@@ -1277,6 +1367,7 @@ mod tests {
             let mut picked = Vec::new();
             sum_range(
                 &views,
+                None,
                 pick,
                 first,
                 &mut force,
@@ -1299,6 +1390,65 @@ mod tests {
                     first + k
                 );
             }
+        }
+        // Region by region, as the sums by region run: each region's part of the range from
+        // the rows that touch the region's grains alone.
+        let regions = GrainRegions::new(grains, 4096);
+        let mut snapshot = GrainSnapshot::default();
+        snapshot.layout = 1;
+        let runs: Vec<RegionRuns> = tables
+            .iter()
+            .map(|(bodies, _)| {
+                let mut runs = RegionRuns::default();
+                // The cached bodies are current: the contacts are not read.
+                let pairs = vec![Contact::vacant(Entity::PLACEHOLDER); bodies.len()];
+                runs.build(&regions, &snapshot, &pairs, bodies, &[]);
+                runs
+            })
+            .collect();
+        let mut force = vec![Force(DVec3::NAN); len];
+        let mut torque = vec![Torque(DVec3::NAN); len];
+        let mut picked = Vec::new();
+        for r in 0..regions.count() {
+            let grains = regions.range(r);
+            let part = grains.start.max(first)..grains.end.min(first + len);
+            if part.is_empty() {
+                continue;
+            }
+            let rows: Vec<Vec<RowRun>> = runs
+                .iter()
+                .map(|runs| {
+                    let mut rows = Vec::new();
+                    runs.touching_runs_descending(r, &mut rows);
+                    rows
+                })
+                .collect();
+            let local = part.start - first..part.end - first;
+            sum_range(
+                &views,
+                Some(&rows),
+                false,
+                part.start,
+                &mut force[local.clone()],
+                &mut torque[local.clone()],
+                &mass[local],
+                g,
+                &mut picked,
+            );
+        }
+        for k in 0..len {
+            assert_eq!(
+                force[k].0.to_array().map(f64::to_bits),
+                force_expected[k].to_array().map(f64::to_bits),
+                "force total of grain {} by region",
+                first + k
+            );
+            assert_eq!(
+                torque[k].0.to_array().map(f64::to_bits),
+                torque_expected[k].to_array().map(f64::to_bits),
+                "torque total of grain {} by region",
+                first + k
+            );
         }
     }
 }

@@ -1,10 +1,12 @@
-//! The force loop run region by region (`talus::contact::RegionForceLoop`: each law's
-//! contacts listed by the region of their first grain in dense order, the lists' runs of
-//! rows evaluated in turn) gives the table-order loop's results bit for bit: the same
-//! scenes, whose energies are not booked (the only steps it serves), end with the same
-//! grains, the same contacts (geometry, force, torques, tangential spring) and the same
-//! energies and contact count, with regions of many sizes. Between the contact-table sorts
-//! (every 20 steps) the contacts made in recycled and appended rows sit outside their
+//! The stages run region by region (`talus::contact::RegionStages`) give the whole-stage
+//! results bit for bit: the force loop, each law's contacts listed by the region of their
+//! first grain in dense order and the lists' runs of rows evaluated in turn, and the force
+//! sums, each region's grains summing the rows that touch them (those of the regions from
+//! the lowest whose rows reach it up to its own) from the last row to the first. The same
+//! scenes, whose energies are not booked (the only steps the region loop serves), end with
+//! the same grains, the same contacts (geometry, force, torques, tangential spring) and the
+//! same energies and contact count, with regions of many sizes. Between the contact-table
+//! sorts (every 20 steps) the contacts made in recycled and appended rows sit outside their
 //! region's run of rows, so each region is evaluated in several runs.
 
 use crate::common;
@@ -12,12 +14,12 @@ use crate::lane_forms::{chute_text, run_with};
 
 use talus::collision::ContactIndex;
 use talus::contact::regions::RegionRuns;
-use talus::contact::{Contact, ContactBodies, RegionForceLoop};
+use talus::contact::{Contact, ContactBodies, RegionStages};
 use talus::core::prelude::*;
 use talus::core::regions::{GrainRegions, REGION_GRAINS};
 
 /// Runs `steps` steps of a scene, region by region with regions of `region_grains` grains
-/// or (`None`) in table order ([`run_with`]).
+/// or (`None`) stage by stage over the whole packing ([`run_with`]).
 fn run(
     text: &str,
     steps: u64,
@@ -25,7 +27,7 @@ fn run(
 ) -> (impl PartialEq + std::fmt::Debug, usize) {
     run_with(text, steps, move |world| {
         if let Some(region_grains) = region_grains {
-            world.insert_resource(RegionForceLoop { region_grains });
+            world.insert_resource(RegionStages { region_grains });
         }
     })
 }
@@ -88,7 +90,7 @@ fn region_runs_after(steps: u64, in_table_order: bool, despawn: bool) -> (usize,
         .contiguous_iter()
         .expect("contact query is dense")
     {
-        runs.build(&regions, &snapshot, c, d);
+        runs.build(&regions, &snapshot, c, d, &[]);
         count += runs.all().len();
         contacts += c.iter().filter(|c| !c.is_vacant()).count();
     }
