@@ -1356,6 +1356,23 @@ mod tests {
                 }
             }
         }
+        // Every total the same bits as the plain sum's.
+        let same_totals = |force: &[Force], torque: &[Torque], how: &str| {
+            for k in 0..len {
+                assert_eq!(
+                    force[k].0.to_array().map(f64::to_bits),
+                    force_expected[k].to_array().map(f64::to_bits),
+                    "force total of grain {} ({how})",
+                    first + k
+                );
+                assert_eq!(
+                    torque[k].0.to_array().map(f64::to_bits),
+                    torque_expected[k].to_array().map(f64::to_bits),
+                    "torque total of grain {} ({how})",
+                    first + k
+                );
+            }
+        };
         let views: Vec<(&[ContactBodies], &[ContactForce])> = tables
             .iter()
             .map(|(b, f)| (b.as_slice(), f.as_slice()))
@@ -1376,20 +1393,7 @@ mod tests {
                 g,
                 &mut picked,
             );
-            for k in 0..len {
-                assert_eq!(
-                    force[k].0.to_array().map(f64::to_bits),
-                    force_expected[k].to_array().map(f64::to_bits),
-                    "force total of grain {} (pick: {pick})",
-                    first + k
-                );
-                assert_eq!(
-                    torque[k].0.to_array().map(f64::to_bits),
-                    torque_expected[k].to_array().map(f64::to_bits),
-                    "torque total of grain {} (pick: {pick})",
-                    first + k
-                );
-            }
+            same_totals(&force, &torque, &format!("pick: {pick}"));
         }
         // Region by region, as the sums by region run: each region's part of the range from
         // the rows that touch the region's grains alone.
@@ -1436,19 +1440,6 @@ mod tests {
                 &mut picked,
             );
         }
-        for k in 0..len {
-            assert_eq!(
-                force[k].0.to_array().map(f64::to_bits),
-                force_expected[k].to_array().map(f64::to_bits),
-                "force total of grain {} by region",
-                first + k
-            );
-            assert_eq!(
-                torque[k].0.to_array().map(f64::to_bits),
-                torque_expected[k].to_array().map(f64::to_bits),
-                "torque total of grain {} by region",
-                first + k
-            );
-        }
+        same_totals(&force, &torque, "by region");
     }
 }
