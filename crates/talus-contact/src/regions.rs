@@ -118,17 +118,17 @@ impl RegionRuns {
         self.first_touching[r] as usize
     }
 
-    /// Sets `out` to every run of rows that touches a grain of region `r` (the runs of
-    /// regions [`Self::first_touching`]`(r)..=r`; untracked grains left out), from the last
-    /// row to the first: the rows whose forces a grain of `r` sums, in the order the force
-    /// sums take them.
-    pub fn touching_runs_descending(&self, r: usize, out: &mut Vec<RowRun>) {
+    /// Every run of rows that touches a grain of region `r` (the runs of regions
+    /// [`Self::first_touching`]`(r)..=r`; untracked grains left out), from the last row to
+    /// the first: the rows whose forces a grain of `r` sums, in the order the force sums
+    /// take them.
+    pub fn touching_runs_descending(&self, r: usize) -> Vec<RowRun> {
         let first = self.offsets[self.first_touching(r)] as usize;
         let end = self.offsets[r + 1] as usize;
-        out.clear();
-        out.extend_from_slice(&self.runs[first..end]);
+        let mut runs = self.runs[first..end].to_vec();
         // Runs are disjoint: ordered by their first rows, they are ordered by every row.
-        out.sort_unstable_by_key(|&[first, _]| std::cmp::Reverse(first));
+        runs.sort_unstable_by_key(|&[first, _]| std::cmp::Reverse(first));
+        runs
     }
 
     /// Cuts the runs, region after region, into batches of at most `max_rows` rows (a run
@@ -283,9 +283,8 @@ mod tests {
             }
             assert!(seen.iter().all(|&s| s), "every row listed");
             // The rows touching each region's grains, from the last row to the first.
-            let mut touching = Vec::new();
             for r in 0..runs.count() {
-                runs.touching_runs_descending(r, &mut touching);
+                let touching = runs.touching_runs_descending(r);
                 assert!(runs.first_touching(r) <= r);
                 assert!(
                     touching.windows(2).all(|w| w[1][1] <= w[0][0]),

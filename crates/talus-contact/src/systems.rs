@@ -1005,11 +1005,7 @@ fn sum_grain_totals(
                 // of the sides they hold lie outside the range, so they are picked.
                 let touching: Vec<Vec<RowRun>> = runs
                     .iter()
-                    .map(|runs| {
-                        let mut touching = Vec::new();
-                        runs.touching_runs_descending(r, &mut touching);
-                        touching
-                    })
+                    .map(|runs| runs.touching_runs_descending(r))
                     .collect();
                 let rows = Some(&touching[..]);
                 sum_range(tables, rows, true, first, force, torque, mass, g, picked)
@@ -1421,11 +1417,7 @@ mod tests {
             }
             let rows: Vec<Vec<RowRun>> = runs
                 .iter()
-                .map(|runs| {
-                    let mut rows = Vec::new();
-                    runs.touching_runs_descending(r, &mut rows);
-                    rows
-                })
+                .map(|runs| runs.touching_runs_descending(r))
                 .collect();
             let local = part.start - first..part.end - first;
             sum_range(
