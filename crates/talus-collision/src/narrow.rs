@@ -87,7 +87,7 @@ impl IndexEntry {
 /// phase runs in parallel over the same chunks as the neighbour list. Each contact is
 /// entered under the body first in dense order only (the neighbour list's candidates of
 /// a grain are the partners after it), so a grain holds about half its coordination
-/// number; three entries fit inline, more spill to the heap. When the
+/// number; two entries fit inline, more spill to the heap. When the
 /// snapshot's order of grains or walls changes (grains added or removed, a component set
 /// changed) the index is re-keyed, from each contact's bodies, before the next pass.
 #[derive(Resource, Default)]

@@ -39,6 +39,7 @@ pub fn kick_drift_translation(
         (With<Grain>, Without<Frozen>),
     >,
     moving: Query<(Entity, &Force, &Mass), (With<Grain>, Without<Frozen>)>,
+    periodic: Option<Res<crate::periodic::PeriodicBox>>,
 ) {
     let dt = clock.pass_dt;
     if dt == 0.0 {
@@ -50,15 +51,28 @@ pub fn kick_drift_translation(
     if deferred.snapshot_holds_motion {
         // The last step's state is the snapshot's: kick and drift its records in place
         // (a grain's velocity and position in one line), the components untouched.
-        let update = |r: &mut GrainRecord, f: &Force, m: &Mass| {
-            kick_twice(&mut r.velocity, f.0, m.0, pending, kick);
-            let dx = r.velocity * dt;
-            r.position += dx;
-            m.0 * g.dot(dx)
+        let kicks = Kicks::new(pending, kick);
+        let update = |records: &mut [GrainRecord], f: &[Force], m: &[Mass]| {
+            let drift = |r: &mut GrainRecord, k: usize| {
+                let dx = r.velocity * dt;
+                r.position += dx;
+                m[k].0 * g.dot(dx)
+            };
+            kick_blocks(
+                records,
+                f,
+                m,
+                kicks,
+                |f| f.0,
+                |m| m.0,
+                record_velocity,
+                drift,
+            )
         };
         let gravity_work = snapshot.kick_drift_held(
             moving.contiguous_iter().expect("grain query is dense"),
             (REDUCTION_CHUNK, PARALLEL_THRESHOLD),
+            periodic.map(|p| *p),
             update,
         );
         ledger.gravity_work += gravity_work;
@@ -68,15 +82,19 @@ pub fn kick_drift_translation(
         return;
     }
     let mut gravity_work = 0.0;
+    let kicks = Kicks::new(pending, kick);
     for (mut p, mut v, f, m) in grains.contiguous_iter_mut().expect("grain query is dense") {
         let p = p.bypass_change_detection();
         let v = v.bypass_change_detection();
-        let update = |((p, v), (f, m)): ((&mut Position, &mut Velocity), (&Force, &Mass))| {
-            kick_twice(&mut v.0, f.0, m.0, pending, kick);
-            let dx = v.0 * dt;
-            p.0 += dx;
-            m.0 * g.dot(dx)
-        };
+        let update =
+            |((p, v), (f, m)): ((&mut [Position], &mut [Velocity]), (&[Force], &[Mass]))| {
+                let drift = |v: &mut Velocity, k: usize| {
+                    let dx = v.0 * dt;
+                    p[k].0 += dx;
+                    m[k].0 * g.dot(dx)
+                };
+                kick_blocks(v, f, m, kicks, |f| f.0, |m| m.0, velocity_of, drift)
+            };
         gravity_work += if p.len() >= PARALLEL_THRESHOLD {
             let partial: Vec<f64> = p
                 .par_chunks_mut(REDUCTION_CHUNK)
@@ -85,21 +103,11 @@ pub fn kick_drift_translation(
                     f.par_chunks(REDUCTION_CHUNK)
                         .zip(m.par_chunks(REDUCTION_CHUNK)),
                 )
-                .map(|((p, v), (f, m))| {
-                    p.iter_mut()
-                        .zip(v.iter_mut())
-                        .zip(f.iter().zip(m.iter()))
-                        .map(update)
-                        .sum::<f64>()
-                })
+                .map(update)
                 .collect();
             partial.iter().sum::<f64>()
         } else {
-            p.iter_mut()
-                .zip(v.iter_mut())
-                .zip(f.iter().zip(m.iter()))
-                .map(update)
-                .sum::<f64>()
+            update(((p, v), (f, m)))
         };
     }
     ledger.gravity_work += gravity_work;
@@ -108,24 +116,120 @@ pub fn kick_drift_translation(
     }
 }
 
-/// Adds to `v` the pending second kick's `F/m` times `pending` (if any), then the first
-/// kick's times `kick`: the operations of the two separate passes, in their order. Under
-/// velocity Verlet the two kicks span the same half step, and their common increment is
-/// computed once (the same bits as computing it twice).
-#[inline(always)]
-fn kick_twice(v: &mut DVec3, f: DVec3, m: f64, pending: Option<f64>, kick: f64) {
-    match pending {
-        Some(first) if first == kick => {
-            let dv = f * (kick / m);
-            *v += dv;
-            *v += dv;
+/// The first kick and a second kick the last step left pending, resolved once per pass
+/// so that a loop over grains carries no branch on them ([`kick_blocks`]): the pending
+/// kick's `F/m` times its time is added first, then the first kick's, the operations of
+/// the two separate passes in their order. Under velocity Verlet the two kicks span the
+/// same half step, and their common increment is computed once (the same bits as
+/// computing it twice).
+#[derive(Clone, Copy, Debug)]
+enum Kicks {
+    /// The first kick alone, by this time, s.
+    One(f64),
+    /// A pending kick as long as the first: their common increment, added twice.
+    SameTwice(f64),
+    /// A pending kick (the first time, s), then the first kick (the second).
+    Two(f64, f64),
+}
+
+impl Kicks {
+    /// The kicks for a pending second kick's time (if any) and the first kick's.
+    fn new(pending: Option<f64>, kick: f64) -> Self {
+        match pending {
+            Some(first) if first == kick => Self::SameTwice(kick),
+            Some(first) => Self::Two(first, kick),
+            None => Self::One(kick),
         }
-        Some(first) => {
-            *v += f * (first / m);
-            *v += f * (kick / m);
-        }
-        None => *v += f * (kick / m),
     }
+}
+
+/// A snapshot record's velocity, for [`kick_blocks`].
+#[inline(always)]
+fn record_velocity(r: &mut GrainRecord) -> &mut DVec3 {
+    &mut r.velocity
+}
+
+/// A grain's velocity, for [`kick_blocks`].
+#[inline(always)]
+fn velocity_of(v: &mut Velocity) -> &mut DVec3 {
+    &mut v.0
+}
+
+/// A grain's spin, for [`kick_blocks`].
+#[inline(always)]
+fn spin_of(w: &mut AngularVelocity) -> &mut DVec3 {
+    &mut w.0
+}
+
+/// Grains kicked a block at a time by [`kick_blocks`].
+const KICK_BLOCK: usize = 64;
+
+/// Kicks each item's velocity (reached by `velocity`) by its force over its mass times
+/// the times of `kicks`, then hands it to `then` with its index in `items`,
+/// and returns the sum of what `then` returns, taken in order as `Iterator::sum` takes it.
+/// A block's divisions (time over mass) come first, in a loop of their own that the
+/// compiler runs four at a time (a division is correctly rounded either way): one at a
+/// time, each waited on its division.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn kick_blocks<T, F: Copy, M: Copy>(
+    items: &mut [T],
+    forces: &[F],
+    masses: &[M],
+    kicks: Kicks,
+    force: impl Fn(F) -> DVec3,
+    mass: impl Fn(M) -> f64,
+    velocity: impl Fn(&mut T) -> &mut DVec3,
+    mut then: impl FnMut(&mut T, usize) -> f64,
+) -> f64 {
+    let mut sum = -0.0;
+    let (mut first_scale, mut kick_scale) = ([0.0; KICK_BLOCK], [0.0; KICK_BLOCK]);
+    let blocks = items
+        .chunks_mut(KICK_BLOCK)
+        .zip(forces.chunks(KICK_BLOCK).zip(masses.chunks(KICK_BLOCK)));
+    for (b, (items, (forces, masses))) in blocks.enumerate() {
+        let base = b * KICK_BLOCK;
+        let (first_time, kick_time) = match kicks {
+            Kicks::One(kick) | Kicks::SameTwice(kick) => (None, kick),
+            Kicks::Two(first, kick) => (Some(first), kick),
+        };
+        for (scale, &m) in kick_scale.iter_mut().zip(masses) {
+            *scale = kick_time / mass(m);
+        }
+        if let Some(first_time) = first_time {
+            for (scale, &m) in first_scale.iter_mut().zip(masses) {
+                *scale = first_time / mass(m);
+            }
+        }
+        let grains = items.iter_mut().zip(forces).enumerate();
+        match kicks {
+            Kicks::One(_) => {
+                for (k, (item, &f)) in grains {
+                    *velocity(item) += force(f) * kick_scale[k];
+                    sum += then(item, base + k);
+                }
+            }
+            Kicks::SameTwice(_) => {
+                for (k, (item, &f)) in grains {
+                    let dv = force(f) * kick_scale[k];
+                    let v = velocity(item);
+                    *v += dv;
+                    *v += dv;
+                    sum += then(item, base + k);
+                }
+            }
+            Kicks::Two(..) => {
+                for (k, (item, &f)) in grains {
+                    let f = force(f);
+                    let v = velocity(item);
+                    *v += f * first_scale[k];
+                    *v += f * kick_scale[k];
+                    sum += then(item, base + k);
+                }
+            }
+        }
+    }
+    sum
 }
 
 /// First rotational kick: ω += a·dt·T/I (spheres need no orientation for contact physics).
@@ -157,14 +261,7 @@ pub fn first_kick_rotation(
             let range = s.table_range(e);
             kick_spins(&mut s.omega[range], |w| w, t, i, pending, kick)
         } else {
-            kick_spins(
-                w.bypass_change_detection(),
-                |w| &mut w.0,
-                t,
-                i,
-                pending,
-                kick,
-            )
+            kick_spins(w.bypass_change_detection(), spin_of, t, i, pending, kick)
         };
     }
     if pending.is_some() {
@@ -177,16 +274,15 @@ pub fn first_kick_rotation(
 /// true: the second kick checked them).
 fn kick_spins<W: Send>(
     w: &mut [W],
-    spin: fn(&mut W) -> &mut DVec3,
+    spin: impl Fn(&mut W) -> &mut DVec3 + Sync,
     t: &[Torque],
     i: &[MomentOfInertia],
     pending: Option<f64>,
     kick: f64,
 ) -> bool {
+    let kicks = Kicks::new(pending, kick);
     let kick_chunk = |(w, (t, i)): (&mut [W], (&[Torque], &[MomentOfInertia]))| {
-        for (w, (t, i)) in w.iter_mut().zip(t.iter().zip(i)) {
-            kick_twice(spin(w), t.0, i.0, pending, kick);
-        }
+        kick_blocks(w, t, i, kicks, |t| t.0, |i| i.0, &spin, |_, _| 0.0);
         // Without a branch or a chain of floating-point additions (see `finite_marker`).
         pending.is_none()
             || w.iter_mut().fold(true, |all, w| {
@@ -476,13 +572,11 @@ fn kick_and_sum_kinetic(
                     // The chunk (48 KiB of velocities and spins) is still in cache when
                     // it is summed.
                     if kick != 0.0 {
-                        for (v, (f, m)) in v.iter_mut().zip(f.iter().zip(m)) {
-                            v.0 += f.0 * (kick / m.0);
-                        }
+                        let kicks = Kicks::One(kick);
+                        kick_blocks(v, f, m, kicks, |f| f.0, |m| m.0, velocity_of, |_, _| 0.0);
                         if terms.rotation {
-                            for (w, (t, i)) in w.iter_mut().zip(t.iter().zip(i)) {
-                                w.0 += t.0 * (kick / i.0);
-                            }
+                            let spin = spin_of;
+                            kick_blocks(w, t, i, kicks, |t| t.0, |i| i.0, spin, |_, _| 0.0);
                         }
                     }
                     if sum {

@@ -136,6 +136,11 @@ pub struct GrainSnapshot {
     /// The blocks' moves as [`gather_snapshot`] merges them (scratch, kept for its
     /// allocation).
     block_scratch: Vec<Moves>,
+    /// Whether this pass's first kick and drift of the held records
+    /// ([`Self::kick_drift_held`]) also wrapped them and took their moves, which the broad
+    /// phase then leaves as they are.
+    moves_taken: bool,
+
     /// What each chunk of [`gather_snapshot`]'s copy found (scratch, kept for its
     /// allocation).
     chunk_scratch: Vec<ChunkMoves>,
@@ -661,10 +666,14 @@ pub fn gather_snapshot(
 ) {
     let s = &mut *snapshot;
     s.set_periodic(periodic.map(|p| *p));
+    let moves_taken = std::mem::take(&mut s.moves_taken);
     if deferred.is_some_and(|d| d.snapshot_holds_motion) {
         // The first kick and the drift worked on the records in place
-        // ([`GrainSnapshot::kick_drift_held`]): nothing to copy.
-        s.refresh_held_motion();
+        // ([`GrainSnapshot::kick_drift_held`]): nothing to copy, and nothing more to do
+        // when they also wrapped them and took their moves.
+        if !moves_taken {
+            s.refresh_held_motion();
+        }
         gather_walls(s, &walls, false);
         return;
     }
@@ -850,38 +859,114 @@ impl GrainSnapshot {
 
     /// The first kick and the drift of the moving grains when the snapshot holds their
     /// motion ([`crate::resources::DeferredKick::snapshot_holds_motion`]): `update` kicks
-    /// and drifts a record in place and returns the work of gravity over its drift. The
+    /// and drifts a chunk of records in place, given their forces and masses, and returns
+    /// the work of gravity over their drifts, summed grain by grain in order. The
     /// tables are those of the last gather, whose grains are consecutive in the snapshot.
     /// Returns the work of gravity, per table the partial sums of the chunks of `chunk`
     /// grains summed in order from `parallel_from` grains up, one sum below: the sums
     /// the kick of the grains' components takes.
+    ///
+    /// Each chunk, once drifted, is also wrapped into an unsheared periodic box
+    /// (`periodic`, this pass's box) and its moves since the reference are taken, which
+    /// is all the broad phase does to held records ([`Self::refresh_held_motion`]): done
+    /// here, while the chunk is in cache, it saves a pass over every record (one more read
+    /// and write of 64 bytes a grain). The grains the kick leaves alone (the frozen ones)
+    /// are wrapped and measured on their own. The broad phase then takes the moves as
+    /// they are.
     pub(crate) fn kick_drift_held<'a>(
         &mut self,
         moving: impl Iterator<Item = HeldTable<'a>>,
         (chunk, parallel_from): (usize, usize),
-        update: impl Fn(&mut GrainRecord, &Force, &Mass) -> f64 + Sync,
+        periodic: Option<crate::periodic::PeriodicBox>,
+        update: impl Fn(&mut [GrainRecord], &[Force], &[Mass]) -> f64 + Sync,
     ) -> f64 {
+        self.set_periodic(periodic);
+        let n = self.records.len();
+        let track_moves = self.move_reference.len() == n;
+        let wrap_box = self.periodic.filter(|b| b.shear.is_none());
+        let wrap = wrap_box.as_ref().map(|b| b.wrap_rule());
+        let (periodic_box, image) = (self.periodic, self.image);
+        let mut block_moves = std::mem::take(&mut self.block_scratch);
+        block_moves.clear();
+        if track_moves {
+            block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
+        }
+        // Wraps a piece of a table (its grains `from..` of the table at `table_start`)
+        // and takes the moves of the blocks it holds a part of.
+        let reference = &self.move_reference[..];
+        let wrap_and_measure = |table_start: usize, from: usize, records: &mut [GrainRecord]| {
+            if let Some(wrap) = &wrap {
+                for record in records.iter_mut() {
+                    wrap.apply(&mut record.position);
+                }
+            }
+            if track_moves {
+                let moved = MovedChunk {
+                    table_start,
+                    from,
+                    positions: records,
+                    reference: &reference[table_start..],
+                };
+                moved.block_moves(|r| r.position, &periodic_box, &image)
+            } else {
+                SmallVec::new()
+            }
+        };
         let mut work = 0.0;
-        let one_chunk = |(records, (f, m)): (&mut [GrainRecord], (&[Force], &[Mass]))| {
-            records
-                .iter_mut()
-                .zip(f.iter().zip(m))
-                .map(|(r, (f, m))| update(r, f, m))
-                .sum::<f64>()
+        let mut kicked: SmallVec<[std::ops::Range<usize>; 4]> = SmallVec::new();
+        let mut merge = |blocks: SmallVec<[(usize, Moves); 20]>| {
+            for (block, moves) in blocks {
+                block_moves[block] = block_moves[block].merge(moves);
+            }
         };
         for (entities, forces, masses) in moving {
             let range = self.table_range(entities);
+            let table_start = range.start;
+            kicked.push(range.clone());
             let records = &mut self.records[range];
-            work += if records.len() >= parallel_from {
+            let one_chunk = |c: usize, records: &mut [GrainRecord], f: &[Force], m: &[Mass]| {
+                let work = update(records, f, m);
+                (work, wrap_and_measure(table_start, c * chunk, records))
+            };
+            if records.len() >= parallel_from {
                 let chunks = records
                     .par_chunks_mut(chunk)
                     .zip(forces.par_chunks(chunk).zip(masses.par_chunks(chunk)));
-                let partial: Vec<f64> = chunks.map(one_chunk).collect();
-                partial.iter().sum::<f64>()
+                let partial: Vec<ChunkMoves> = chunks
+                    .enumerate()
+                    .map(|(c, (records, (f, m)))| one_chunk(c, records, f, m))
+                    .collect();
+                work += partial.iter().map(|&(work, _)| work).sum::<f64>();
+                partial.into_iter().for_each(|(_, blocks)| merge(blocks));
             } else {
-                one_chunk((records, (forces, masses)))
-            };
+                let (chunk_work, blocks) = one_chunk(0, records, forces, masses);
+                work += chunk_work;
+                merge(blocks);
+            }
         }
+        // The rest: the grains between and after the kicked tables.
+        kicked.sort_by_key(|r| r.start);
+        let mut left = Vec::new();
+        let mut at = 0;
+        for range in kicked.iter().chain(std::iter::once(&(n..n))) {
+            if at < range.start {
+                left.push(at..range.start);
+            }
+            at = at.max(range.end);
+        }
+        if wrap.is_some() || track_moves {
+            for range in left {
+                let table_start = range.start;
+                let chunks = self.records[range].par_chunks_mut(COPY_CHUNK).enumerate();
+                let partial: Vec<_> = chunks
+                    .map(|(c, records)| wrap_and_measure(table_start, c * COPY_CHUNK, records))
+                    .collect();
+                partial.into_iter().for_each(&mut merge);
+            }
+        }
+        let chunk_results = std::mem::take(&mut self.chunk_scratch);
+        self.finish_moves(block_moves, chunk_results);
+        self.moves_taken = true;
         work
     }
 
@@ -1039,6 +1124,79 @@ mod tests {
             (bound_sq - expected).abs() < 1e-9,
             "{bound_sq} against {expected}"
         );
+    }
+
+    /// The first kick and drift of held records wraps them and takes their moves as the
+    /// broad phase's own pass over them does: the same records and the same moves, block by
+    /// block, with the kicked grains' table starting off a block's start, chunks smaller
+    /// than a block and not aligned on them, grains drifting across the box's faces, and
+    /// frozen grains (not kicked) before them.
+    #[test]
+    fn kick_drift_held_wraps_and_measures_as_the_broad_phase_does() {
+        let mut world = World::new();
+        world.insert_resource(GrainSnapshot::default());
+        let box_ = PeriodicBox {
+            lo: DVec3::ZERO,
+            hi: DVec3::new(10.0, 8.0, 50.0),
+            axes: [true, true, false],
+            shear: None,
+        };
+        world.insert_resource(box_);
+        // A fixed pseudo-random sequence in [0, 1).
+        let mut state = 12345_u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for k in 0..3000 {
+            let p = DVec3::new(10.0 * next(), 8.0 * next(), 50.0 * next());
+            let v = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * 4.0;
+            let grain = spawn_grain(&mut world, p);
+            world.get_mut::<Velocity>(grain).unwrap().0 = v;
+            world.entity_mut(grain).insert(Force(DVec3::ZERO));
+            if k < 300 {
+                world.entity_mut(grain).insert(Frozen);
+            }
+        }
+        gather(&mut world);
+        world.resource_mut::<GrainSnapshot>().mark_move_reference();
+        let mut fused = world.remove_resource::<GrainSnapshot>().unwrap();
+        // The frozen grains stand moved since the reference, some out of the box: the
+        // kick leaves them alone, the wrap and the moves do not.
+        for record in &mut fused.records[..300] {
+            record.position.x += 0.3;
+        }
+        let mut separate = fused.clone();
+        let dt = 0.1;
+        let drift = |records: &mut [GrainRecord], _: &[Force], _: &[Mass]| {
+            for r in records.iter_mut() {
+                r.position += r.velocity * dt;
+            }
+            0.0
+        };
+        let mut moving =
+            world.query_filtered::<(Entity, &Force, &Mass), (With<Grain>, Without<Frozen>)>();
+        let moving = moving.query(&world);
+        let tables: Vec<_> = moving.contiguous_iter().unwrap().collect();
+        let kicked = fused.table_range(tables[0].0);
+        assert!(
+            kicked.start % MOVE_BLOCK != 0,
+            "the kicked table starts off a block"
+        );
+        fused.kick_drift_held(tables.iter().copied(), (100, 500), Some(box_), drift);
+        for (entities, forces, masses) in tables.iter().copied() {
+            let range = separate.table_range(entities);
+            drift(&mut separate.records[range], forces, masses);
+        }
+        separate.refresh_held_motion();
+        assert!(fused.records == separate.records);
+        let outside = |r: &GrainRecord| r.position.x >= 10.0 || r.position.y < 0.0;
+        assert!(!fused.records.iter().any(outside), "every grain wrapped");
+        assert!(fused.block_moves().unwrap() == separate.block_moves().unwrap());
+        assert_eq!(fused.move_bound_sq(), separate.move_bound_sq());
+        assert!(fused.move_bound_sq() > 0.0);
     }
 
     /// No grain: nothing moved (the empty box of moves gives no NaN).
