@@ -876,6 +876,21 @@ impl GrainSnapshot {
     pub(crate) fn kick_drift_held<'a>(
         &mut self,
         moving: impl Iterator<Item = HeldTable<'a>>,
+        chunking: (usize, usize),
+        periodic: Option<crate::periodic::PeriodicBox>,
+        update: impl Fn(&mut [GrainRecord], &[Force], &[Mass]) -> f64 + Sync,
+    ) -> f64 {
+        let work = self.update_wrap_and_measure(moving, chunking, periodic, update);
+        self.moves_taken = true;
+        work
+    }
+
+    /// [`Self::kick_drift_held`]'s pass: `update` on the tables of `moving`, each chunk
+    /// then wrapped and measured, and the other grains wrapped and measured in chunks of
+    /// their own; the moves stored.
+    fn update_wrap_and_measure<'a>(
+        &mut self,
+        moving: impl Iterator<Item = HeldTable<'a>>,
         (chunk, parallel_from): (usize, usize),
         periodic: Option<crate::periodic::PeriodicBox>,
         update: impl Fn(&mut [GrainRecord], &[Force], &[Mass]) -> f64 + Sync,
@@ -966,57 +981,18 @@ impl GrainSnapshot {
         }
         let chunk_results = std::mem::take(&mut self.chunk_scratch);
         self.finish_moves(block_moves, chunk_results);
-        self.moves_taken = true;
         work
     }
 
     /// The broad phase's pass when the snapshot holds the grains' motion: the grains are
     /// those of the last step and their records were kicked and drifted in place
     /// ([`Self::kick_drift_held`]), so only the wrap into an unsheared periodic box and the
-    /// moves since the reference are left, taken as [`gather_snapshot`]'s copy takes them.
+    /// moves since the reference are left, taken as [`gather_snapshot`]'s copy takes them:
+    /// for a pass whose kick did not take them (one with a zero time step).
     fn refresh_held_motion(&mut self) {
-        let n = self.records.len();
-        let track_moves = self.move_reference.len() == n;
-        let wrap_box = self.periodic.filter(|b| b.shear.is_none());
-        let wrap = wrap_box.as_ref().map(|b| b.wrap_rule());
-        let (periodic_box, image) = (self.periodic, self.image);
-        let mut block_moves = std::mem::take(&mut self.block_scratch);
-        let mut chunk_results = std::mem::take(&mut self.chunk_scratch);
-        block_moves.clear();
-        chunk_results.clear();
-        if track_moves {
-            block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
-        }
-        if track_moves || wrap.is_some() {
-            let reference = &self.move_reference[..];
-            let chunks = self.records.par_chunks_mut(COPY_CHUNK).enumerate();
-            chunk_results.par_extend(chunks.map(|(c, records)| {
-                if let Some(wrap) = &wrap {
-                    for record in records.iter_mut() {
-                        wrap.apply(&mut record.position);
-                    }
-                }
-                let blocks = if track_moves {
-                    let from = c * COPY_CHUNK;
-                    let moved = MovedChunk {
-                        table_start: 0,
-                        from,
-                        positions: records,
-                        reference,
-                    };
-                    moved.block_moves(|r| r.position, &periodic_box, &image)
-                } else {
-                    SmallVec::new()
-                };
-                (0.0, blocks)
-            }));
-        }
-        for (_, blocks) in chunk_results.drain(..) {
-            for (block, moves) in blocks {
-                block_moves[block] = block_moves[block].merge(moves);
-            }
-        }
-        self.finish_moves(block_moves, chunk_results);
+        let no_kick = |_: &mut [GrainRecord], _: &[Force], _: &[Mass]| 0.0;
+        let chunking = (COPY_CHUNK, usize::MAX);
+        self.update_wrap_and_measure(std::iter::empty(), chunking, self.periodic, no_kick);
     }
 
     /// Stores the moves of the blocks of grains found by a gather (and the whole
@@ -1127,12 +1103,12 @@ mod tests {
     }
 
     /// The first kick and drift of held records wraps them and takes their moves as the
-    /// broad phase's own pass over them does: the same records and the same moves, block by
+    /// copy of the grains' components does: the same records and the same moves, block by
     /// block, with the kicked grains' table starting off a block's start, chunks smaller
     /// than a block and not aligned on them, grains drifting across the box's faces, and
     /// frozen grains (not kicked) before them.
     #[test]
-    fn kick_drift_held_wraps_and_measures_as_the_broad_phase_does() {
+    fn kick_drift_held_wraps_and_measures_as_the_copy_does() {
         let mut world = World::new();
         world.insert_resource(GrainSnapshot::default());
         let box_ = PeriodicBox {
@@ -1162,14 +1138,14 @@ mod tests {
         }
         gather(&mut world);
         world.resource_mut::<GrainSnapshot>().mark_move_reference();
-        let mut fused = world.remove_resource::<GrainSnapshot>().unwrap();
+        let mut held = world.resource::<GrainSnapshot>().clone();
+        let dt = 0.1;
         // The frozen grains stand moved since the reference, some out of the box: the
         // kick leaves them alone, the wrap and the moves do not.
-        for record in &mut fused.records[..300] {
-            record.position.x += 0.3;
+        let frozen_move = DVec3::new(0.3, 0.0, 0.0);
+        for record in &mut held.records[..300] {
+            record.position += frozen_move;
         }
-        let mut separate = fused.clone();
-        let dt = 0.1;
         let drift = |records: &mut [GrainRecord], _: &[Force], _: &[Mass]| {
             for r in records.iter_mut() {
                 r.position += r.velocity * dt;
@@ -1180,23 +1156,25 @@ mod tests {
             world.query_filtered::<(Entity, &Force, &Mass), (With<Grain>, Without<Frozen>)>();
         let moving = moving.query(&world);
         let tables: Vec<_> = moving.contiguous_iter().unwrap().collect();
-        let kicked = fused.table_range(tables[0].0);
+        let kicked = held.table_range(tables[0].0);
         assert!(
             kicked.start % MOVE_BLOCK != 0,
             "the kicked table starts off a block"
         );
-        fused.kick_drift_held(tables.iter().copied(), (100, 500), Some(box_), drift);
-        for (entities, forces, masses) in tables.iter().copied() {
-            let range = separate.table_range(entities);
-            drift(&mut separate.records[range], forces, masses);
+        held.kick_drift_held(tables.iter().copied(), (100, 500), Some(box_), drift);
+        // The same motion in the components, copied by the broad phase.
+        let mut grains = world.query::<(&mut Position, &Velocity, Has<Frozen>)>();
+        for (mut p, v, frozen) in grains.iter_mut(&mut world) {
+            p.0 += if frozen { frozen_move } else { v.0 * dt };
         }
-        separate.refresh_held_motion();
-        assert!(fused.records == separate.records);
+        gather(&mut world);
+        let copied = world.resource::<GrainSnapshot>();
+        assert!(held.records == copied.records);
         let outside = |r: &GrainRecord| r.position.x >= 10.0 || r.position.y < 0.0;
-        assert!(!fused.records.iter().any(outside), "every grain wrapped");
-        assert!(fused.block_moves().unwrap() == separate.block_moves().unwrap());
-        assert_eq!(fused.move_bound_sq(), separate.move_bound_sq());
-        assert!(fused.move_bound_sq() > 0.0);
+        assert!(!held.records.iter().any(outside), "every grain wrapped");
+        assert!(held.block_moves().unwrap() == copied.block_moves().unwrap());
+        assert_eq!(held.move_bound_sq(), copied.move_bound_sq());
+        assert!(held.move_bound_sq() > 0.0);
     }
 
     /// No grain: nothing moved (the empty box of moves gives no NaN).
