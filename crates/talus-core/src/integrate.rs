@@ -168,8 +168,8 @@ const KICK_BLOCK: usize = 64;
 /// the times of `kicks`, then hands it to `then` with its index in `items`,
 /// and returns the sum of what `then` returns, taken in order as `Iterator::sum` takes it.
 /// A block's divisions (time over mass) come first, in a loop of their own that the
-/// compiler runs four at a time (a division is correctly rounded either way): one at a
-/// time, each waited on its division.
+/// compiler runs four at a time (a division is correctly rounded either way, so the bits
+/// are the same); inside the grain loop each update waited on its own division.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn kick_blocks<T, F: Copy, M: Copy>(
@@ -575,8 +575,7 @@ fn kick_and_sum_kinetic(
                         let kicks = Kicks::One(kick);
                         kick_blocks(v, f, m, kicks, |f| f.0, |m| m.0, velocity_of, |_, _| 0.0);
                         if terms.rotation {
-                            let spin = spin_of;
-                            kick_blocks(w, t, i, kicks, |t| t.0, |i| i.0, spin, |_, _| 0.0);
+                            kick_blocks(w, t, i, kicks, |t| t.0, |i| i.0, spin_of, |_, _| 0.0);
                         }
                     }
                     if sum {

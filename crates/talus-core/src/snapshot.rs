@@ -140,7 +140,6 @@ pub struct GrainSnapshot {
     /// ([`Self::kick_drift_held`]) also wrapped them and took their moves, which the broad
     /// phase then leaves as they are.
     moves_taken: bool,
-
     /// What each chunk of [`gather_snapshot`]'s copy found (scratch, kept for its
     /// allocation).
     chunk_scratch: Vec<ChunkMoves>,
@@ -901,7 +900,9 @@ impl GrainSnapshot {
         let wrap_box = self.periodic.filter(|b| b.shear.is_none());
         let wrap = wrap_box.as_ref().map(|b| b.wrap_rule());
         let (periodic_box, image) = (self.periodic, self.image);
+        // Both scratch lists are kept between steps for their allocations.
         let mut block_moves = std::mem::take(&mut self.block_scratch);
+        let mut chunk_results = std::mem::take(&mut self.chunk_scratch);
         block_moves.clear();
         if track_moves {
             block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
@@ -947,12 +948,16 @@ impl GrainSnapshot {
                 let chunks = records
                     .par_chunks_mut(chunk)
                     .zip(forces.par_chunks(chunk).zip(masses.par_chunks(chunk)));
-                let partial: Vec<ChunkMoves> = chunks
-                    .enumerate()
-                    .map(|(c, (records, (f, m)))| one_chunk(c, records, f, m))
-                    .collect();
-                work += partial.iter().map(|&(work, _)| work).sum::<f64>();
-                partial.into_iter().for_each(|(_, blocks)| merge(blocks));
+                chunk_results.clear();
+                chunk_results.par_extend(
+                    chunks
+                        .enumerate()
+                        .map(|(c, (records, (f, m)))| one_chunk(c, records, f, m)),
+                );
+                work += chunk_results.iter().map(|&(work, _)| work).sum::<f64>();
+                chunk_results
+                    .drain(..)
+                    .for_each(|(_, blocks)| merge(blocks));
             } else {
                 let (chunk_work, blocks) = one_chunk(0, records, forces, masses);
                 work += chunk_work;
@@ -973,13 +978,15 @@ impl GrainSnapshot {
             for range in left {
                 let table_start = range.start;
                 let chunks = self.records[range].par_chunks_mut(COPY_CHUNK).enumerate();
-                let partial: Vec<_> = chunks
-                    .map(|(c, records)| wrap_and_measure(table_start, c * COPY_CHUNK, records))
-                    .collect();
-                partial.into_iter().for_each(&mut merge);
+                chunk_results.clear();
+                chunk_results.par_extend(chunks.map(|(c, records)| {
+                    (0.0, wrap_and_measure(table_start, c * COPY_CHUNK, records))
+                }));
+                chunk_results
+                    .drain(..)
+                    .for_each(|(_, blocks)| merge(blocks));
             }
         }
-        let chunk_results = std::mem::take(&mut self.chunk_scratch);
         self.finish_moves(block_moves, chunk_results);
         work
     }
