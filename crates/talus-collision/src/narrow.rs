@@ -112,9 +112,8 @@ pub struct ContactIndex {
     /// live bits refer to; `None` when they must be derived again (the index re-keyed,
     /// contacts entered from a saved state).
     live_build: Option<u64>,
-    /// Per chunk of grains: the touching pairs that have no contact yet, with their slots
-    /// in the chunk's candidates (scratch).
-    new_pairs: Vec<Vec<(u32, u32, u32)>>,
+    /// Per chunk of grains: the touching pairs that have no contact yet (scratch).
+    new_pairs: Vec<Vec<NewPair>>,
     /// Spawn every new contact and despawn every ended one, instead of handing ended
     /// contacts to new pairs of their law (off by default; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
@@ -140,6 +139,24 @@ pub struct ContactIndex {
 /// A vacant row of a contact table: its archetype, the region of its grain, its row and
 /// its entity.
 type VacantRow = (ArchetypeId, u32, usize, Entity);
+
+/// A touching pair with no contact yet, as the parallel pass ([`narrow_chunk`]) found it,
+/// with the contact it is to get: the serial handout then reads no grain's entity or
+/// material, which lie all over the packing (a quarter of its time on the 32,000-grain
+/// chute, with the reads asked for ahead).
+#[derive(Clone, Copy, Debug)]
+struct NewPair {
+    /// The grain first in dense order (the pair's key in the index).
+    key: u32,
+    /// The other body: a grain's dense index or a wall code.
+    partner: u32,
+    /// The pair's place among its chunk's candidates ([`NO_SLOT`] if none).
+    slot: u32,
+    /// The pair's entry in [`ContactLawTable::slots`].
+    law: u32,
+    /// The pair the contact joins.
+    contact: Contact,
+}
 
 impl ContactIndex {
     /// Number of live contacts.
@@ -348,12 +365,28 @@ fn update_contacts_inner(
                 &mut ahead,
             );
         });
+    // In table order alone, every grain is in one region.
+    let region_len = if index.handout_in_table_order {
+        usize::MAX
+    } else {
+        REGION_GRAINS
+    };
+    let regions = GrainRegions::new(n, region_len);
+    let ended_region = |key: u32| {
+        if key == NO_KEY {
+            u32::MAX
+        } else {
+            regions.region_of(key) as u32
+        }
+    };
     // A contact ends when its bodies neither touch now nor carried a force at its last
     // evaluation (one that did is kept for one more evaluation, so that its law books the
     // work of the step in which it ended). Those that did not are few, and the force
     // loops listed them.
-    // Each with its key grain, whose region the contact's row stands in.
+    // Each with its key grain, whose region the contact's row stands in; those the
+    // threads ended with their rows found.
     let mut ended: Vec<(Entity, u32)> = Vec::new();
+    let mut ended_rows: Vec<Vec<EndedRow>> = Vec::new();
     let view: &World = world;
     if check_all {
         for (key, entries) in per_grain.iter_mut().enumerate() {
@@ -371,27 +404,23 @@ fn update_contacts_inner(
             });
         }
     } else {
-        // The pairs' grains and contact lists are all over the packing: each pair asks
-        // for those of the pair a few ahead.
-        let mut ahead = idle.pairs.iter().skip(LISTS_AHEAD);
-        for &[a, b] in &idle.pairs {
-            if let Some(&[a, b]) = ahead.next() {
-                let (key, partner) = first_in_order(a, b);
-                prefetch_item(per_grain, key as usize);
-                prefetch_item(&s.records, key as usize);
-                prefetch_item(&s.records, partner as usize);
-            }
-            let (key, partner) = first_in_order(a, b);
-            if touching(s, range, key as usize, partner) {
-                continue;
-            }
-            let entries = &mut per_grain[key as usize];
-            if let Some(k) = entries.iter().position(|e| e.partner == partner) {
-                let entry = entries.remove(k);
-                ended.push((entry.contact(), key));
-                set_live(live, key as usize, entry.slot, false);
-            }
-        }
+        // Each thread ends the contacts keyed in its share of whole chunks of grains, whose
+        // contact lists and live bits it alone holds, and finds their rows: a serial
+        // stretch of the step otherwise, latency-bound (the pairs' grains, lists and
+        // entities are all over the packing), in which the other threads wait. Which
+        // thread ends a contact changes nothing: the rows are sorted below.
+        let parts = rayon::current_num_threads().clamp(1, chunks.max(1));
+        let part_chunks = chunks.div_ceil(parts).max(1);
+        let pairs = &idle.pairs[..];
+        per_grain[..n]
+            .par_chunks_mut(part_chunks * CHUNK)
+            .zip(live[..chunks].par_chunks_mut(part_chunks))
+            .enumerate()
+            .map(|(part, (lists, live))| {
+                let first = part * part_chunks * CHUNK;
+                end_idle_contacts(s, range, pairs, first, lists, live, view, &ended_region)
+            })
+            .collect_into_vec(&mut ended_rows);
     }
     // The list is read; its allocation goes back for the next force pass to fill.
     let mut pairs = idle.pairs;
@@ -409,20 +438,6 @@ fn update_contacts_inner(
     // out by region, then in table order, new pairs taken in the order they were found
     // (chunk by chunk, grain by grain, partner by partner, walls last): a fixed function of
     // the state, not of entity ids, so a resumed run makes the same choices.
-    // In table order alone, every grain is in one region.
-    let region_len = if index.handout_in_table_order {
-        usize::MAX
-    } else {
-        REGION_GRAINS
-    };
-    let regions = GrainRegions::new(n, region_len);
-    let ended_region = |key: u32| {
-        if key == NO_KEY {
-            u32::MAX
-        } else {
-            regions.region_of(key) as u32
-        }
-    };
     orphans.retain(|&c| world.get_entity(c).is_ok());
     // The rows of ended contacts that no new pair takes stay in their tables, vacant, for
     // the next new contacts of their regions: a despawn would move the table's last
@@ -442,6 +457,7 @@ fn update_contacts_inner(
             let at = world.entity(c).location();
             (at.archetype_id, region, at.table_row.index(), c, key)
         })
+        .chain(ended_rows.into_iter().flatten())
         .collect();
     ended_at.sort_unstable_by_key(|&(archetype, region, row, _, _)| (archetype, region, row));
     // The vacant rows join them, in the same order: two sorted runs, which a stable sort
@@ -488,8 +504,8 @@ fn update_contacts_inner(
         ..
     } = index;
     let mut reused = vec![false; ended_at.len()];
-    let mut to_spawn: Vec<(u32, u32, u32, Contact, &LawSlot)> = Vec::new();
-    let mut unplaced: Vec<(u32, u32, u32, Contact, &LawSlot)> = Vec::new();
+    let mut to_spawn: Vec<(NewPair, &LawSlot)> = Vec::new();
+    let mut unplaced: Vec<(NewPair, &LawSlot)> = Vec::new();
     // A new contact knows its bodies' places in this step's snapshot, which the force loop
     // reads next: its first evaluation goes through the law's lane form like any other.
     let bodies_of = |i: u32, j: u32| ContactBodies {
@@ -497,60 +513,39 @@ fn update_contacts_inner(
         b: j,
         layout: s.layout,
     };
-    let mut hand_out = |per_grain: &mut [GrainContacts],
-                        live: &mut [Vec<u64>],
-                        group: &mut Reusable,
-                        k: usize,
-                        (i, j, slot, pair): (u32, u32, u32, Contact)| {
-        let (_, _, row, contact, _) = ended_at[k];
-        reused[k] = true;
-        group.reuses.push((contact, row, pair, bodies_of(i, j)));
-        per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
-        set_live(live, i as usize, slot, true);
-    };
-    // A pair's grains are anywhere in the packing: the pair a few ahead asks for its key
-    // grain's contact list and both grains' entities and materials (each an array of its
-    // own), on which the loop otherwise waits pair after pair (the prefetches took a
-    // quarter off the loop's time on the 32,000-grain chute).
+    let mut hand_out =
+        |per_grain: &mut [GrainContacts], live: &mut [Vec<u64>], group: &mut Reusable, k, new| {
+            let NewPair {
+                key,
+                partner,
+                slot,
+                contact: pair,
+                ..
+            } = new;
+            let (_, _, row, contact, _) = ended_at[k];
+            reused[k] = true;
+            group
+                .reuses
+                .push((contact, row, pair, bodies_of(key, partner)));
+            per_grain[key as usize].push(IndexEntry::new(partner, contact, slot));
+            set_live(live, key as usize, slot, true);
+        };
+    // A pair's key grain is anywhere in the packing: the pair a few ahead asks for its
+    // contact list, on which the loop otherwise waits pair after pair.
     let mut ahead = new_pairs[..chunks].iter().flatten().skip(LISTS_AHEAD);
-    for &(i, j, slot) in new_pairs[..chunks].iter().flatten() {
-        if let Some(&(i, j, _)) = ahead.next() {
-            prefetch_item(per_grain, i as usize);
-            prefetch_item(&s.entity, i as usize);
-            prefetch_item(&s.material, i as usize);
-            if ContactBodies::wall_of(j).is_none() {
-                prefetch_item(&s.entity, j as usize);
-                prefetch_item(&s.material, j as usize);
-            }
+    for &new in new_pairs[..chunks].iter().flatten() {
+        if let Some(ahead) = ahead.next() {
+            prefetch_item(per_grain, ahead.key as usize);
         }
-        let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
-            let wall = &s.walls[k];
-            (wall.entity, wall.material, ContactKind::GrainWall)
-        } else {
-            (
-                s.entity[j as usize],
-                s.material[j as usize],
-                ContactKind::GrainGrain,
-            )
-        };
-        let law = table
-            .get(s.material[i as usize], material_b)
+        let law = table.slots[new.law as usize]
+            .as_ref()
             .expect("the parallel pass kept only interacting pairs");
-        // The grain first in dense order is `a` (never the entity ids, which depend on
-        // the history of spawns: a restored run must choose alike).
-        let pair = Contact {
-            a: s.entity[i as usize],
-            b,
-            kind,
-            pair_slot: law.pair_slot,
-        };
         let group = reusable.iter_mut().find(|g| g.archetype == law.archetype);
         let Some(group) = group else {
-            to_spawn.push((i, j, slot, pair, law));
+            to_spawn.push((new, law));
             continue;
         };
-        // The new pair's key is `i`, the first of its grains in dense order.
-        let region = regions.region_of(i) as u32;
+        let region = regions.region_of(new.key) as u32;
         let own = group
             .by_region
             .binary_search_by_key(&region, |run| run.region)
@@ -560,17 +555,17 @@ fn update_contacts_inner(
             Some(at) => {
                 let k = group.by_region[at].next;
                 group.by_region[at].next += 1;
-                hand_out(per_grain, live, group, k, (i, j, slot, pair));
+                hand_out(per_grain, live, group, k, new);
             }
-            None => unplaced.push((i, j, slot, pair, law)),
+            None => unplaced.push((new, law)),
         }
     }
     // The pairs whose region had no ended contact left take those of other regions, in
     // order, and are spawned when none is left.
-    for (i, j, slot, pair, law) in unplaced {
+    for (new, law) in unplaced {
         let group = reusable.iter_mut().find(|g| g.archetype == law.archetype);
         let Some(group) = group else {
-            to_spawn.push((i, j, slot, pair, law));
+            to_spawn.push((new, law));
             continue;
         };
         while group
@@ -584,9 +579,9 @@ fn update_contacts_inner(
             Some(run) => {
                 let k = run.next;
                 run.next += 1;
-                hand_out(per_grain, live, group, k, (i, j, slot, pair));
+                hand_out(per_grain, live, group, k, new);
             }
-            None => to_spawn.push((i, j, slot, pair, law)),
+            None => to_spawn.push((new, law)),
         }
     }
     // The ended contacts no pair took become vacant rows of their regions (in the same call
@@ -643,10 +638,10 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain, live, ..
     } = index;
-    for (i, j, slot, pair, law) in to_spawn {
-        let contact = (law.spawn)(world, pair, bodies_of(i, j));
-        per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
-        set_live(live, i as usize, slot, true);
+    for (new, law) in to_spawn {
+        let contact = (law.spawn)(world, new.contact, bodies_of(new.key, new.partner));
+        per_grain[new.key as usize].push(IndexEntry::new(new.partner, contact, new.slot));
+        set_live(live, new.key as usize, new.slot, true);
     }
     if world
         .resource::<Clock>()
@@ -969,6 +964,59 @@ fn set_live(live: &mut [Vec<u64>], key: usize, slot: u32, on: bool) {
     }
 }
 
+/// Ends the contacts of `pairs` (idle ones: they carried no force at their last
+/// evaluation) whose grains no longer touch, for the key grains `first..` of `lists` (their
+/// contact lists, `first` a multiple of [`CHUNK`]) and `live` (their chunks' live bits);
+/// the other pairs are another call's. Returns each ended contact's row, as the handout
+/// lists it.
+#[allow(clippy::too_many_arguments)]
+fn end_idle_contacts(
+    s: &GrainSnapshot,
+    range: f64,
+    pairs: &[[u32; 2]],
+    first: usize,
+    lists: &mut [GrainContacts],
+    live: &mut [Vec<u64>],
+    world: &World,
+    region_of: &impl Fn(u32) -> u32,
+) -> Vec<EndedRow> {
+    let len = lists.len();
+    let keyed_here = move |&[a, b]: &[u32; 2]| {
+        let (key, partner) = first_in_order(a, b);
+        let local = (key as usize).wrapping_sub(first);
+        (local < len).then_some((key, partner, local))
+    };
+    let mut ended = Vec::new();
+    // The pairs' grains and contact lists are all over the packing: each pair asks for
+    // those of the pair a few ahead.
+    let mut ahead = pairs.iter().filter_map(keyed_here).skip(LISTS_AHEAD);
+    for (key, partner, local) in pairs.iter().filter_map(keyed_here) {
+        if let Some((key, partner, local)) = ahead.next() {
+            prefetch_item(lists, local);
+            prefetch_item(&s.records, key as usize);
+            prefetch_item(&s.records, partner as usize);
+        }
+        if touching(s, range, key as usize, partner) {
+            continue;
+        }
+        let entries = &mut lists[local];
+        if let Some(k) = entries.iter().position(|e| e.partner == partner) {
+            let entry = entries.remove(k);
+            set_live(live, local, entry.slot, false);
+            let contact = entry.contact();
+            let at = world.entity(contact).location();
+            ended.push((
+                at.archetype_id,
+                region_of(key),
+                at.table_row.index(),
+                contact,
+                key,
+            ));
+        }
+    }
+    ended
+}
+
 /// What every chunk of the narrow phase's parallel pass reads.
 struct PassState<'a> {
     s: &'a GrainSnapshot,
@@ -1017,7 +1065,7 @@ fn narrow_chunk(
     entries: &[GrainContacts],
     candidates: &CandidateChunk,
     live: &[u64],
-    new: &mut Vec<(u32, u32, u32)>,
+    new: &mut Vec<NewPair>,
     ahead: &mut talus_core::snapshot::LinePrefetcher,
 ) {
     let PassState {
@@ -1033,8 +1081,8 @@ fn narrow_chunk(
     let frozen = |i: usize| s.inverse_mass(i) == 0.0;
     // A touching candidate pair reaches here only without a live bit, so it has no
     // contact (the bits are exact: `tests/neighbour_rebuild.rs`); a grain and a wall
-    // (no slot) are looked up in the grain's contacts. The partner's material is looked
-    // up only for a pair with no contact: the materials are an array of their own, which
+    // (no slot) are looked up in the grain's contacts. The partner's material and entity
+    // are looked up only for a pair with no contact: they are arrays of their own, which
     // a large packing's partners would each miss in cache.
     let mut touch = |i: usize, partner: u32, slot: u32| {
         let known = |partner| entries[i - base].iter().any(|e| e.partner == partner);
@@ -1043,12 +1091,32 @@ fn narrow_chunk(
             "a live pair without its bit"
         );
         if slot != NO_SLOT || !known(partner) {
-            let material_b = match ContactBodies::wall_of(partner) {
-                Some(w) => s.walls[w].material,
-                None => s.material[partner as usize],
+            let (b, material_b, kind) = match ContactBodies::wall_of(partner) {
+                Some(w) => {
+                    let wall = &s.walls[w];
+                    (wall.entity, wall.material, ContactKind::GrainWall)
+                }
+                None => {
+                    let j = partner as usize;
+                    (s.entity[j], s.material[j], ContactKind::GrainGrain)
+                }
             };
-            if table.get(s.material[i], material_b).is_some() {
-                new.push((i as u32, partner, slot));
+            if let Some((law, slot_of_law)) = table.slot_of(s.material[i], material_b) {
+                // The grain first in dense order is `a` (never the entity ids, which
+                // depend on the history of spawns: a restored run must choose alike).
+                let contact = Contact {
+                    a: s.entity[i],
+                    b,
+                    kind,
+                    pair_slot: slot_of_law.pair_slot,
+                };
+                new.push(NewPair {
+                    key: i as u32,
+                    partner,
+                    slot,
+                    law,
+                    contact,
+                });
             }
         }
     };
@@ -1120,5 +1188,5 @@ fn narrow_chunk(
     // By grain, then partner (wall codes after every grain's index), as one pass over
     // the grains in index order would list them: where and when the list was built never
     // shows in the order contacts are made (and forces summed).
-    new.sort_unstable();
+    new.sort_unstable_by_key(|pair| (pair.key, pair.partner, pair.slot));
 }

@@ -1165,7 +1165,7 @@ mod tests {
         let tables: Vec<_> = moving.contiguous_iter().unwrap().collect();
         let kicked = held.table_range(tables[0].0);
         assert!(
-            kicked.start % MOVE_BLOCK != 0,
+            !kicked.start.is_multiple_of(MOVE_BLOCK),
             "the kicked table starts off a block"
         );
         held.kick_drift_held(tables.iter().copied(), (100, 500), Some(box_), drift);
