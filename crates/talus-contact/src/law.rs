@@ -295,10 +295,17 @@ fn spawn_contact<L: ContactLaw>(
 /// 80–100 this way). The rows are the caller's, checked against the table's entities. No
 /// system reads the contacts' change ticks, so they are left alone, as the table sort
 /// leaves them.
+///
+/// Each thread writes the rows of its share of the table (the columns split into one
+/// contiguous range per thread, each job reading the whole list and taking the rows in its
+/// range): the rows are few and far apart, each write waits on memory, and the narrow
+/// phase's other threads would wait for a serial loop. What a row receives does not depend
+/// on which thread writes it.
 fn recycle_contacts<L: ContactLaw>(
     world: &mut World,
     reuses: &[(Entity, usize, Contact, ContactBodies)],
 ) {
+    use rayon::prelude::*;
     let mut contacts = world.query::<(
         Entity,
         &mut Contact,
@@ -313,39 +320,77 @@ fn recycle_contacts<L: ContactLaw>(
         .contiguous_iter_mut()
         .expect("contact query is dense")
     {
-        let (contact, geometry, force, bodies, history) = (
-            contact.bypass_change_detection(),
-            geometry.bypass_change_detection(),
-            force.bypass_change_detection(),
-            bodies.bypass_change_detection(),
-            history.bypass_change_detection(),
-        );
-        for (k, &(entity, row, pair, pair_bodies)) in reuses.iter().enumerate() {
-            // The rows are few and far apart: ask for those of a few contacts ahead.
-            if let Some(&(_, ahead, _, _)) = reuses.get(k + RECYCLE_AHEAD) {
-                prefetch_item(entities, ahead);
-                prefetch_item(contact, ahead);
-                prefetch_item(geometry, ahead);
-                prefetch_item(force, ahead);
-                prefetch_item(bodies, ahead);
-                prefetch_item(history, ahead);
-            }
-            if entities.get(row) != Some(&entity) {
-                continue;
-            }
-            contact[row] = pair;
-            geometry[row] = ContactGeometry::default();
-            force[row] = ContactForce::default();
-            bodies[row] = pair_bodies;
-            history[row].0 = L::History::default();
-            recycled += 1;
-        }
+        let share = entities.len().div_ceil(rayon::current_num_threads()).max(1);
+        recycled += entities
+            .par_chunks(share)
+            .zip(contact.bypass_change_detection().par_chunks_mut(share))
+            .zip(geometry.bypass_change_detection().par_chunks_mut(share))
+            .zip(force.bypass_change_detection().par_chunks_mut(share))
+            .zip(bodies.bypass_change_detection().par_chunks_mut(share))
+            .zip(history.bypass_change_detection().par_chunks_mut(share))
+            .enumerate()
+            .map(
+                |(k, (((((entities, contact), geometry), force), bodies), history))| {
+                    let first = k * share;
+                    let columns = (entities, contact, geometry, force, bodies, history);
+                    recycle_rows::<L>(reuses, first, columns)
+                },
+            )
+            .sum::<usize>();
     }
     assert_eq!(
         recycled,
         reuses.len(),
         "the narrow phase recycles only contacts of the law's archetype"
     );
+}
+
+/// The columns of a range of a law's table rows, for [`recycle_rows`].
+type RecycledRows<'a, H> = (
+    &'a [Entity],
+    &'a mut [Contact],
+    &'a mut [ContactGeometry],
+    &'a mut [ContactForce],
+    &'a mut [ContactBodies],
+    &'a mut [LawState<H>],
+);
+
+/// Writes the reuses of [`recycle_contacts`] whose rows fall in the range of table rows
+/// from `first` whose columns are given; returns how many it wrote.
+fn recycle_rows<L: ContactLaw>(
+    reuses: &[(Entity, usize, Contact, ContactBodies)],
+    first: usize,
+    (entities, contact, geometry, force, bodies, history): RecycledRows<'_, L::History>,
+) -> usize {
+    let len = entities.len();
+    let in_range =
+        move |&(entity, row, pair, pair_bodies): &(Entity, usize, Contact, ContactBodies)| {
+            let local = row.wrapping_sub(first);
+            (local < len).then_some((entity, local, pair, pair_bodies))
+        };
+    let mut recycled = 0;
+    // The rows are few and far apart: ask for those of a few contacts ahead.
+    let mut ahead = reuses.iter().filter_map(in_range).skip(RECYCLE_AHEAD);
+    for (entity, row, pair, pair_bodies) in reuses.iter().filter_map(in_range) {
+        if let Some((_, ahead, _, _)) = ahead.next() {
+            prefetch_item(entities, ahead);
+            prefetch_item(contact, ahead);
+            prefetch_item(geometry, ahead);
+            prefetch_item(force, ahead);
+            prefetch_item(bodies, ahead);
+            prefetch_item(history, ahead);
+        }
+        if entities[row] != entity {
+            continue;
+        }
+        contact[row] = pair;
+        geometry[row] = ContactGeometry::default();
+        force[row] = ContactForce::default();
+        bodies[row] = pair_bodies;
+        history[row].0 = L::History::default();
+        recycled += 1;
+    }
+    recycled
 }
 
 /// How many contacts ahead [`recycle_contacts`] asks for the rows it will write.
