@@ -436,10 +436,7 @@ fn update_contacts_inner(
         .chain(ended)
         .map(|(c, key)| (c, ended_region(key), key));
     let mut ended_at: Vec<EndedRow> = ended
-        .map(|(c, region, key)| {
-            let at = world.entity(c).location();
-            (at.archetype_id, region, at.table_row.index(), c, key)
-        })
+        .map(|(c, region, key)| ended_row(world, c, region, key))
         .chain(ended_rows.into_iter().flatten())
         .collect();
     ended_at.sort_unstable_by_key(|&(archetype, region, row, _, _)| (archetype, region, row));
@@ -663,6 +660,13 @@ fn update_contacts_inner(
 /// region of its key grain, its row, its entity and its key grain ([`NO_KEY`] if not
 /// known, [`VACANT_KEY`] for a row already vacant).
 type EndedRow = (ArchetypeId, u32, usize, Entity, u32);
+
+/// The handout's entry for an ended contact: its row found from its entity.
+#[inline]
+fn ended_row(world: &World, contact: Entity, region: u32, key: u32) -> EndedRow {
+    let at = world.entity(contact).location();
+    (at.archetype_id, region, at.table_row.index(), contact, key)
+}
 
 /// The key of a row that was vacant before the pass.
 const VACANT_KEY: u32 = u32::MAX - 1;
@@ -1007,15 +1011,7 @@ fn end_idle_contacts(
         if let Some(k) = entries.iter().position(|e| e.partner == partner) {
             let entry = entries.remove(k);
             set_live(live, local, entry.slot, false);
-            let contact = entry.contact();
-            let at = world.entity(contact).location();
-            ended.push((
-                at.archetype_id,
-                region_of(key),
-                at.table_row.index(),
-                contact,
-                key,
-            ));
+            ended.push(ended_row(world, entry.contact(), region_of(key), key));
         }
     }
     ended
