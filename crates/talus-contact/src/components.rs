@@ -217,6 +217,80 @@ pub struct ContactEnergyPartials {
     pub chunks: Vec<ContactEnergySums>,
 }
 
+/// Which grains each chunk of [`crate::systems::ENERGY_CHUNK_LEN`] rows of a contact table
+/// touches, as the force loop of the current pass left the rows' bodies
+/// ([`ContactBodies`]): for the force sums on two or more threads, where each thread sets
+/// the totals of a range of grains and would otherwise test both bodies of every row
+/// against its range. A chunk whose mask shares no bit with a thread's range holds no
+/// side that thread adds, so it skips the chunk; the sides it adds, and their order, are
+/// those of the full scan. The force loops fill it (on two or more threads only),
+/// [`crate::systems::apply_contact_forces`] reads it and empties it, so it never outlives
+/// the pass whose rows it describes.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct ChunkGrainMasks {
+    /// Per table: the address and length of its bodies column, which name the table
+    /// within a pass, and one mask per chunk of rows in table order.
+    tables: Vec<(usize, usize, Vec<u64>)>,
+}
+
+impl ChunkGrainMasks {
+    /// The bit of a body: its dense index over [`Self::shift`], bit 63 for everything
+    /// above (the last grains and the walls' codes share it, which only costs a skip).
+    #[inline]
+    fn bit(body: u32, shift: u32) -> u64 {
+        1 << (body >> shift).min(63)
+    }
+
+    /// How far the dense indices of a snapshot of `grains` grains are shifted to make
+    /// a bit of a mask: the smallest shift that gives at most 64 blocks of grains.
+    pub fn shift(grains: usize) -> u32 {
+        let mut shift = 0;
+        while grains.saturating_sub(1) >> shift >= 64 {
+            shift += 1;
+        }
+        shift
+    }
+
+    /// The mask of the bodies of `rows` (one chunk), for a snapshot of `shift`.
+    pub fn of_rows(rows: &[ContactBodies], shift: u32) -> u64 {
+        rows.iter()
+            .fold(0, |m, b| m | Self::bit(b.a, shift) | Self::bit(b.b, shift))
+    }
+
+    /// The mask of the grains `first..first + len`, for a snapshot of `shift`.
+    pub fn of_range(first: usize, len: usize, shift: u32) -> u64 {
+        if len == 0 {
+            return 0;
+        }
+        let low = (first >> shift).min(63);
+        let high = ((first + len - 1) >> shift).min(63);
+        (u64::MAX >> (63 - high)) & (u64::MAX << low)
+    }
+
+    /// Records the chunks' masks of the table whose bodies column is `bodies`, replacing
+    /// any earlier record of it.
+    pub fn record(&mut self, bodies: &[ContactBodies], masks: Vec<u64>) {
+        let key = (bodies.as_ptr() as usize, bodies.len());
+        self.tables.retain(|t| (t.0, t.1) != key);
+        self.tables.push((key.0, key.1, masks));
+    }
+
+    /// The chunks' masks of the table whose bodies column is `bodies`, if this pass's
+    /// force loop recorded them.
+    pub fn of_table(&self, bodies: &[ContactBodies]) -> Option<&[u64]> {
+        let key = (bodies.as_ptr() as usize, bodies.len());
+        self.tables
+            .iter()
+            .find(|t| (t.0, t.1) == key)
+            .map(|t| &t.2[..])
+    }
+
+    /// Forgets every table's masks (the pass they describe is over).
+    pub fn clear(&mut self) {
+        self.tables.clear();
+    }
+}
+
 /// The contacts that carried no force at their last evaluation
 /// ([`ContactForce::is_active`] false: the bodies had parted, and the law had booked the
 /// step in which they did), by their bodies' codes in the snapshot ([`ContactBodies`]

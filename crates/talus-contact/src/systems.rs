@@ -134,6 +134,7 @@ impl Plugin for ContactPlugin {
             n_materials: n,
         });
         sim.world.insert_resource(ContactEnergyPartials::default());
+        sim.world.insert_resource(ChunkGrainMasks::default());
         sim.world.insert_resource(IdleContacts::default());
         sim.world
             .insert_resource(crate::order::ContactTableSorts::default());
@@ -164,6 +165,7 @@ pub fn evaluate_law<L: ContactLaw>(
     region_loop: Option<Res<RegionStages>>,
     mut partials: ResMut<ContactEnergyPartials>,
     mut idle: ResMut<IdleContacts>,
+    mut grain_masks: ResMut<ChunkGrainMasks>,
     mut region_runs: Local<RegionRuns>,
     mut contacts: Query<(
         &Contact,
@@ -273,9 +275,12 @@ pub fn evaluate_law<L: ContactLaw>(
     let idle = &mut *idle;
     idle.layout = snapshot.layout;
     idle.evaluated = true;
-    let mut outcomes: Vec<(ContactEnergySums, Vec<[u32; 2]>)> = Vec::new();
+    let mut outcomes: Vec<(ContactEnergySums, Vec<[u32; 2]>, u64)> = Vec::new();
     let by_region = region_loop.filter(|_| !book);
     let regions = by_region.map(|on| GrainRegions::new(snapshot.len(), on.region_grains));
+    // Only the force sums of two or more threads read the chunks' masks (`ChunkGrainMasks`).
+    let mask_shift =
+        (rayon::current_num_threads() > 1).then(|| ChunkGrainMasks::shift(snapshot.len()));
     for (c, mut h, mut g, mut f, mut d) in contacts
         .contiguous_iter_mut()
         .expect("contact query is dense")
@@ -303,7 +308,7 @@ pub fn evaluate_law<L: ContactLaw>(
                             columns,
                             runs.batch(k),
                         );
-                        (to_global(sums), idle)
+                        (to_global(sums), idle, 0)
                     }),
             );
         } else {
@@ -316,15 +321,24 @@ pub fn evaluate_law<L: ContactLaw>(
                     .with_max_len(FORCE_CHUNKS_PER_JOB)
                     .map(|((((c, h), g), f), d)| {
                         let (sums, idle) = if book {
-                            evaluate_chunk::<L, _, true>(&evaluate, lanes, snapshot, c, h, g, f, d)
+                            evaluate_chunk::<L, _, true>(
+                                &evaluate, lanes, snapshot, c, h, g, f, &mut *d,
+                            )
                         } else {
-                            evaluate_chunk::<L, _, false>(&evaluate, lanes, snapshot, c, h, g, f, d)
+                            evaluate_chunk::<L, _, false>(
+                                &evaluate, lanes, snapshot, c, h, g, f, &mut *d,
+                            )
                         };
-                        (to_global(sums), idle)
+                        // The bodies as the sums will read them (the loop refreshed them).
+                        let mask = mask_shift.map_or(0, |shift| ChunkGrainMasks::of_rows(d, shift));
+                        (to_global(sums), idle, mask)
                     }),
             );
+            if mask_shift.is_some() {
+                grain_masks.record(d, outcomes.iter().map(|o| o.2).collect());
+            }
         }
-        for (sums, pairs) in outcomes.drain(..) {
+        for (sums, pairs, _) in outcomes.drain(..) {
             partials.push(sums);
             idle.pairs.extend(pairs);
         }
@@ -799,7 +813,7 @@ pub fn apply_contact_forces(
     channels: Res<DissipationChannels>,
     mut ledger: ResMut<EnergyLedger>,
     mut energy: ResMut<EnergySnapshot>,
-    mut partials: ResMut<ContactEnergyPartials>,
+    (mut partials, mut grain_masks): (ResMut<ContactEnergyPartials>, ResMut<ChunkGrainMasks>),
     contacts: Query<(&Contact, &ContactBodies, &ContactForce)>,
     (mut grains, frozen): (GrainTotals, FrozenGrains),
     mut walls: Query<(Entity, &mut WallLoad)>,
@@ -846,12 +860,14 @@ pub fn apply_contact_forces(
         &snapshot,
         &tables,
         by_region,
+        Some(&grain_masks),
         &mut grains,
         &frozen,
         which,
         config.gravity,
         &mut picked,
     );
+    grain_masks.clear();
     frozen_totals.pending = left;
     // Counts, the worst overlap and the energies come summed per chunk from the force
     // loop; the walls' loads from every contact with a wall, in table order.
@@ -939,11 +955,15 @@ type SumPart<'a> = (
 /// each reads only the rows that touch them ([`RegionRuns::touching_runs_descending`]),
 /// from the last to the first as the whole scan does: the same additions in the same
 /// order.
+///
+/// With `grain_masks` (the force loop's [`ChunkGrainMasks`] of this pass), a range that
+/// picks skips the chunks of rows that touch none of its grains.
 #[allow(clippy::too_many_arguments)]
 fn sum_grain_totals(
     snapshot: &GrainSnapshot,
     tables: &[(&[ContactBodies], &[ContactForce])],
     by_region: Option<(&GrainRegions, &[RegionRuns])>,
+    grain_masks: Option<&ChunkGrainMasks>,
     grains: &mut GrainTotals,
     frozen: &FrozenGrains,
     which: TotalsOf,
@@ -998,6 +1018,7 @@ fn sum_grain_totals(
     }
     picked.resize_with(parts.len(), Vec::new);
     let pick = rayon::current_num_threads() > 1;
+    let skip = grain_masks.map(|masks| (masks, ChunkGrainMasks::shift(n)));
     parts.into_par_iter().zip(picked.par_iter_mut()).for_each(
         |((first, force, torque, mass, region), picked)| match (region, by_region) {
             (Some(r), Some((_, runs))) => {
@@ -1008,9 +1029,13 @@ fn sum_grain_totals(
                     .map(|runs| runs.touching_runs_descending(r))
                     .collect();
                 let rows = Some(&touching[..]);
-                sum_range(tables, rows, true, first, force, torque, mass, g, picked)
+                sum_range(
+                    tables, rows, None, true, first, force, torque, mass, g, picked,
+                )
             }
-            _ => sum_range(tables, None, pick, first, force, torque, mass, g, picked),
+            _ => sum_range(
+                tables, None, skip, pick, first, force, torque, mass, g, picked,
+            ),
         },
     );
     left_frozen
@@ -1051,6 +1076,7 @@ fn sum_frozen_totals(
         &snapshot,
         &tables,
         None,
+        None,
         &mut grains,
         &frozen,
         TotalsOf::Frozen,
@@ -1074,6 +1100,13 @@ fn sum_frozen_totals(
 /// With `rows` (one list per table, each from its last row to its first: a region's rows,
 /// [`RegionRuns::touching_runs_descending`]) only those rows are scanned, in that order,
 /// and always by picking.
+///
+/// With `skip` (the pass's [`ChunkGrainMasks`] and the snapshot's mask shift), picking
+/// passes over the chunks of rows whose masks share no bit with the range's: none of
+/// their sides is in the range, so the same sides are added in the same order. The
+/// contact tables are in the order of their rows' first bodies (between sorts, each
+/// region's new contacts in its own rows), so on two threads each range skips most of
+/// the other's rows.
 ///
 /// With `pick` (two or more threads), every contact's two bodies are first tested against
 /// the range without a branch, each side in range appended to `picked` as
@@ -1099,6 +1132,7 @@ fn sum_frozen_totals(
 fn sum_range(
     tables: &[(&[ContactBodies], &[ContactForce])],
     rows: Option<&[Vec<RowRun>]>,
+    skip: Option<(&ChunkGrainMasks, u32)>,
     pick: bool,
     first: usize,
     force: &mut [Force],
@@ -1185,30 +1219,44 @@ fn sum_range(
     // Two entries a contact at most, plus the one written past the last kept; blocks of
     // contacts keep the list small (no buffer that grows with the packing) and in cache.
     picked.resize(2 * PICK_BLOCK + 1, 0);
-    // The rows to scan, as slices in the order they are scanned (each from its end).
-    let mut pieces: Vec<(&[ContactBodies], &[ContactForce])> = Vec::new();
+    // The rows to scan, as slices in the order they are scanned (each from its end), with
+    // the masks of a whole table's chunks where the force loop left them.
+    let mut pieces: Vec<ScanPiece> = Vec::new();
     for (t, &(bodies, forces)) in tables.iter().enumerate().rev() {
         match rows {
             Some(rows) => pieces.extend(rows[t].iter().map(|&[first, end]| {
                 let rows = first as usize..end as usize;
-                (&bodies[rows.clone()], &forces[rows])
+                (&bodies[rows.clone()], &forces[rows], None)
             })),
-            None => pieces.push((bodies, forces)),
+            None => {
+                let masks = skip
+                    .and_then(|(masks, _)| masks.of_table(bodies))
+                    .filter(|m| m.len() == bodies.len().div_ceil(ENERGY_CHUNK_LEN));
+                pieces.push((bodies, forces, masks));
+            }
         }
     }
-    for (bodies, forces) in pieces {
+    let range_mask = skip.map_or(0, |(_, shift)| ChunkGrainMasks::of_range(first, len, shift));
+    for (bodies, forces, masks) in pieces {
         let blocks = bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK));
-        for (bodies, forces) in blocks.rev() {
+        for (block, (bodies, forces)) in blocks.enumerate().rev() {
             let mut count = 0;
             // The lowest offset picked (`usize::MAX` for none).
             let mut low = usize::MAX;
-            for (row, b) in bodies.iter().enumerate() {
-                let code = (row as u32) << 1;
-                picked[count] = code;
-                count += usize::from(in_range(b.a));
-                picked[count] = code | 1;
-                count += usize::from(in_range(b.b));
-                low = low.min(offset(b.a).min(offset(b.b)));
+            for (chunk, rows) in bodies.chunks(ENERGY_CHUNK_LEN).enumerate() {
+                let chunk_index = block * (PICK_BLOCK / ENERGY_CHUNK_LEN) + chunk;
+                if masks.is_some_and(|m| m[chunk_index] & range_mask == 0) {
+                    continue;
+                }
+                let base = chunk * ENERGY_CHUNK_LEN;
+                for (row, b) in rows.iter().enumerate() {
+                    let code = ((base + row) as u32) << 1;
+                    picked[count] = code;
+                    count += usize::from(in_range(b.a));
+                    picked[count] = code | 1;
+                    count += usize::from(in_range(b.b));
+                    low = low.min(offset(b.a).min(offset(b.b)));
+                }
             }
             if low < set_from {
                 let from = low.saturating_sub(START_LEAD);
@@ -1233,6 +1281,11 @@ fn sum_range(
     start(force, torque, 0, set_from);
 }
 
+/// Rows [`sum_range`] scans in one piece: their bodies and forces, and the masks of their
+/// chunks ([`ChunkGrainMasks`]) when the piece is a whole table whose masks the force loop
+/// left.
+type ScanPiece<'a> = (&'a [ContactBodies], &'a [ContactForce], Option<&'a [u64]>);
+
 /// The smallest range of grains whose totals [`sum_range`] sets as its scan reaches them:
 /// on the chute (one thread), setting them late costs 3–11 % of the stage at 32,000
 /// grains (1.5 MB of totals, in the L3 either way) and saves 5–10 % at 128,000 and 13–18 %
@@ -1252,8 +1305,10 @@ const START_LEAD: usize = 1024;
 /// to.
 const SUM_AHEAD: usize = 16;
 
-/// Contacts whose sides [`sum_range`] picks at a time.
+/// Contacts whose sides [`sum_range`] picks at a time: whole chunks of the force loop,
+/// whose [`ChunkGrainMasks`] it tests.
 const PICK_BLOCK: usize = 2048;
+const _: () = assert!(PICK_BLOCK.is_multiple_of(ENERGY_CHUNK_LEN));
 
 /// The unbalanced-force ratio of the packing (Yade's `unbalancedForce`): the mean size
 /// of the net force on the free grains (contacts and body forces, as summed in the
@@ -1381,6 +1436,7 @@ mod tests {
             sum_range(
                 &views,
                 None,
+                None,
                 pick,
                 first,
                 &mut force,
@@ -1391,6 +1447,41 @@ mod tests {
             );
             same_totals(&force, &torque, &format!("pick: {pick}"));
         }
+        // In ranges of 6,000 grains, as threads pick them, each skipping the chunks of rows
+        // whose masks miss its range (most of them here): a mask or a range's bits one
+        // block short leaves sides out.
+        let shift = ChunkGrainMasks::shift(grains);
+        let mut masks = ChunkGrainMasks::default();
+        for (bodies, _) in &tables {
+            let chunks = bodies
+                .chunks(ENERGY_CHUNK_LEN)
+                .map(|rows| ChunkGrainMasks::of_rows(rows, shift))
+                .collect();
+            masks.record(bodies, chunks);
+        }
+        let mut force = vec![Force(DVec3::NAN); len];
+        let mut torque = vec![Torque(DVec3::NAN); len];
+        let mut picked = Vec::new();
+        for start in (0..len).step_by(6_000) {
+            let local = start..(start + 6_000).min(len);
+            sum_range(
+                &views,
+                None,
+                Some((&masks, shift)),
+                true,
+                first + start,
+                &mut force[local.clone()],
+                &mut torque[local.clone()],
+                &mass[local],
+                g,
+                &mut picked,
+            );
+        }
+        same_totals(
+            &force,
+            &torque,
+            "picked in ranges, chunks skipped by their masks",
+        );
         // Region by region, as the sums by region run: each region's part of the range from
         // the rows that touch the region's grains alone.
         let regions = GrainRegions::new(grains, 4096);
@@ -1423,6 +1514,7 @@ mod tests {
             sum_range(
                 &views,
                 Some(&rows),
+                None,
                 false,
                 part.start,
                 &mut force[local.clone()],
@@ -1433,5 +1525,41 @@ mod tests {
             );
         }
         same_totals(&force, &torque, "by region");
+    }
+
+    /// A chunk's mask has the bit of each of its bodies' blocks of grains; a range's mask
+    /// the bits of every block it reaches; indices past the 64th block (the walls' codes
+    /// among them) all take bit 63.
+    #[test]
+    fn chunk_masks_hold_the_blocks_of_their_bodies() {
+        assert_eq!(ChunkGrainMasks::shift(0), 0);
+        assert_eq!(ChunkGrainMasks::shift(64), 0);
+        assert_eq!(ChunkGrainMasks::shift(65), 1);
+        assert_eq!(ChunkGrainMasks::shift(32_000), 9);
+        let shift = ChunkGrainMasks::shift(32_000);
+        let rows = [
+            ContactBodies {
+                a: 0,
+                b: 511,
+                layout: 1,
+            },
+            ContactBodies {
+                a: 512,
+                b: WALL_BODY_BASE,
+                layout: 1,
+            },
+        ];
+        assert_eq!(ChunkGrainMasks::of_rows(&rows, shift), 0b11 | 1 << 63);
+        assert_eq!(ChunkGrainMasks::of_range(511, 2, shift), 0b11);
+        assert_eq!(ChunkGrainMasks::of_range(1_024, 512, shift), 0b100);
+        assert_eq!(ChunkGrainMasks::of_range(5, 0, shift), 0);
+        assert_eq!(
+            ChunkGrainMasks::of_range(31_000, 1_000, shift),
+            1 << 60 | 1 << 61 | 1 << 62
+        );
+        assert_eq!(
+            ChunkGrainMasks::of_range(0, usize::MAX >> 1, shift),
+            u64::MAX
+        );
     }
 }
