@@ -112,9 +112,11 @@ pub struct ContactIndex {
     /// live bits refer to; `None` when they must be derived again (the index re-keyed,
     /// contacts entered from a saved state).
     live_build: Option<u64>,
-    /// Per chunk of grains: the touching pairs that have no contact yet, with their slots
-    /// in the chunk's candidates (scratch).
-    new_pairs: Vec<Vec<(u32, u32, u32)>>,
+    /// Per chunk of grains: the touching pairs that have no contact yet (scratch).
+    new_pairs: Vec<Vec<NewPair>>,
+    /// Per chunk of grains: the same, listed bare, as (key, partner, slot) (scratch;
+    /// [`narrow_chunk`] says when).
+    bare_pairs: Vec<Vec<(u32, u32, u32)>>,
     /// Spawn every new contact and despawn every ended one, instead of handing ended
     /// contacts to new pairs of their law (off by default; the results differ only by
     /// the order in which contact forces are summed, for comparisons).
@@ -140,6 +142,24 @@ pub struct ContactIndex {
 /// A vacant row of a contact table: its archetype, the region of its grain, its row and
 /// its entity.
 type VacantRow = (ArchetypeId, u32, usize, Entity);
+
+/// A touching pair with no contact yet, as the parallel pass ([`narrow_chunk`]) found it,
+/// with the contact it is to get: the serial handout then reads no grain's entity or
+/// material, which lie all over the packing (a quarter of its time on the 32,000-grain
+/// chute, with the reads asked for ahead).
+#[derive(Clone, Copy, Debug)]
+struct NewPair {
+    /// The grain first in dense order (the pair's key in the index).
+    key: u32,
+    /// The other body: a grain's dense index or a wall code.
+    partner: u32,
+    /// The pair's place among its chunk's candidates ([`NO_SLOT`] if none).
+    slot: u32,
+    /// The pair's entry in [`ContactLawTable::slots`].
+    law: u32,
+    /// The pair the contact joins.
+    contact: Contact,
+}
 
 impl ContactIndex {
     /// Number of live contacts.
@@ -289,12 +309,16 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain,
         new_pairs,
+        bare_pairs,
         live,
         live_build,
         ..
     } = index;
     if new_pairs.len() < chunks {
         new_pairs.resize_with(chunks, Vec::new);
+    }
+    if bare_pairs.len() < chunks {
+        bare_pairs.resize_with(chunks, Vec::new);
     }
     if *live_build != Some(list.builds) || live.len() < chunks {
         // A new list (or a re-keyed index): each contact's pair is found among its
@@ -315,12 +339,13 @@ fn update_contacts_inner(
         .par_chunks(CHUNK)
         .zip(list.chunks[..chunks].par_iter())
         .zip(new_pairs[..chunks].par_iter_mut())
+        .zip(bare_pairs[..chunks].par_iter_mut())
         .zip(live[..chunks].par_iter())
         .enumerate()
         // Chunks differ in cost (dense and dilute regions, the frozen base): small jobs,
         // which idle threads steal, even the threads' shares out.
         .with_max_len(2)
-        .for_each(|(chunk, (((entries, candidates), new), live))| {
+        .for_each(|(chunk, ((((entries, candidates), new), bare), live))| {
             let pass_state = PassState {
                 s,
                 table,
@@ -344,7 +369,7 @@ fn update_contacts_inner(
                 entries,
                 candidates,
                 live,
-                new,
+                (new, bare),
                 &mut ahead,
             );
         });
@@ -480,12 +505,13 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain,
         new_pairs,
+        bare_pairs,
         live,
         ..
     } = index;
     let mut reused = vec![false; ended_at.len()];
-    let mut to_spawn: Vec<(u32, u32, u32, Contact, &LawSlot)> = Vec::new();
-    let mut unplaced: Vec<(u32, u32, u32, Contact, &LawSlot)> = Vec::new();
+    let mut to_spawn: Vec<(NewPair, &LawSlot)> = Vec::new();
+    let mut unplaced: Vec<(NewPair, &LawSlot)> = Vec::new();
     // A new contact knows its bodies' places in this step's snapshot, which the force loop
     // reads next: its first evaluation goes through the law's lane form like any other.
     let bodies_of = |i: u32, j: u32| ContactBodies {
@@ -493,60 +519,60 @@ fn update_contacts_inner(
         b: j,
         layout: s.layout,
     };
-    let mut hand_out = |per_grain: &mut [GrainContacts],
-                        live: &mut [Vec<u64>],
-                        group: &mut Reusable,
-                        k: usize,
-                        (i, j, slot, pair): (u32, u32, u32, Contact)| {
-        let (_, _, row, contact, _) = ended_at[k];
-        reused[k] = true;
-        group.reuses.push((contact, row, pair, bodies_of(i, j)));
-        per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
-        set_live(live, i as usize, slot, true);
+    let mut hand_out =
+        |per_grain: &mut [GrainContacts], live: &mut [Vec<u64>], group: &mut Reusable, k, new| {
+            let NewPair {
+                key,
+                partner,
+                slot,
+                contact: pair,
+                ..
+            } = new;
+            let (_, _, row, contact, _) = ended_at[k];
+            reused[k] = true;
+            group
+                .reuses
+                .push((contact, row, pair, bodies_of(key, partner)));
+            per_grain[key as usize].push(IndexEntry::new(partner, contact, slot));
+            set_live(live, key as usize, slot, true);
+        };
+    // Chunk after chunk, each chunk's pairs in its one non-empty list; a bare pair gets
+    // its contact here.
+    let listed = || {
+        new_pairs[..chunks]
+            .iter()
+            .zip(&bare_pairs[..chunks])
+            .flat_map(|(made, bare)| {
+                let bare = bare.iter().map(|&(key, partner, slot)| {
+                    new_pair(s, table, key as usize, partner, slot)
+                        .expect("the parallel pass kept only interacting pairs")
+                });
+                made.iter().copied().chain(bare)
+            })
     };
-    // A pair's grains are anywhere in the packing: the pair a few ahead asks for its key
-    // grain's contact list and both grains' entities and materials (each an array of its
-    // own), on which the loop otherwise waits pair after pair (the prefetches took a
-    // quarter off the loop's time on the 32,000-grain chute).
-    let mut ahead = new_pairs[..chunks].iter().flatten().skip(LISTS_AHEAD);
-    for &(i, j, slot) in new_pairs[..chunks].iter().flatten() {
-        if let Some(&(i, j, _)) = ahead.next() {
-            prefetch_item(per_grain, i as usize);
-            prefetch_item(&s.entity, i as usize);
-            prefetch_item(&s.material, i as usize);
-            if ContactBodies::wall_of(j).is_none() {
-                prefetch_item(&s.entity, j as usize);
-                prefetch_item(&s.material, j as usize);
-            }
+    // A pair's key grain is anywhere in the packing: the pair a few ahead asks for its
+    // contact list, on which the loop otherwise waits pair after pair.
+    let mut ahead = new_pairs[..chunks]
+        .iter()
+        .zip(&bare_pairs[..chunks])
+        .flat_map(|(made, bare)| {
+            let bare = bare.iter().map(|&(key, _, _)| key);
+            made.iter().map(|pair| pair.key).chain(bare)
+        })
+        .skip(LISTS_AHEAD);
+    for new in listed() {
+        if let Some(ahead) = ahead.next() {
+            prefetch_item(per_grain, ahead as usize);
         }
-        let (b, material_b, kind) = if let Some(k) = ContactBodies::wall_of(j) {
-            let wall = &s.walls[k];
-            (wall.entity, wall.material, ContactKind::GrainWall)
-        } else {
-            (
-                s.entity[j as usize],
-                s.material[j as usize],
-                ContactKind::GrainGrain,
-            )
-        };
-        let law = table
-            .get(s.material[i as usize], material_b)
+        let law = table.slots[new.law as usize]
+            .as_ref()
             .expect("the parallel pass kept only interacting pairs");
-        // The grain first in dense order is `a` (never the entity ids, which depend on
-        // the history of spawns: a restored run must choose alike).
-        let pair = Contact {
-            a: s.entity[i as usize],
-            b,
-            kind,
-            pair_slot: law.pair_slot,
-        };
         let group = reusable.iter_mut().find(|g| g.archetype == law.archetype);
         let Some(group) = group else {
-            to_spawn.push((i, j, slot, pair, law));
+            to_spawn.push((new, law));
             continue;
         };
-        // The new pair's key is `i`, the first of its grains in dense order.
-        let region = regions.region_of(i) as u32;
+        let region = regions.region_of(new.key) as u32;
         let own = group
             .by_region
             .binary_search_by_key(&region, |run| run.region)
@@ -556,17 +582,17 @@ fn update_contacts_inner(
             Some(at) => {
                 let k = group.by_region[at].next;
                 group.by_region[at].next += 1;
-                hand_out(per_grain, live, group, k, (i, j, slot, pair));
+                hand_out(per_grain, live, group, k, new);
             }
-            None => unplaced.push((i, j, slot, pair, law)),
+            None => unplaced.push((new, law)),
         }
     }
     // The pairs whose region had no ended contact left take those of other regions, in
     // order, and are spawned when none is left.
-    for (i, j, slot, pair, law) in unplaced {
+    for (new, law) in unplaced {
         let group = reusable.iter_mut().find(|g| g.archetype == law.archetype);
         let Some(group) = group else {
-            to_spawn.push((i, j, slot, pair, law));
+            to_spawn.push((new, law));
             continue;
         };
         while group
@@ -580,10 +606,18 @@ fn update_contacts_inner(
             Some(run) => {
                 let k = run.next;
                 run.next += 1;
-                hand_out(per_grain, live, group, k, (i, j, slot, pair));
+                hand_out(per_grain, live, group, k, new);
             }
-            None => to_spawn.push((i, j, slot, pair, law)),
+            None => to_spawn.push((new, law)),
         }
+    }
+    drop(ahead);
+    for (made, bare) in new_pairs[..chunks]
+        .iter_mut()
+        .zip(&mut bare_pairs[..chunks])
+    {
+        made.clear();
+        bare.clear();
     }
     // The ended contacts no pair took become vacant rows of their regions (in the same call
     // that writes the handed-out ones); those whose grain is not known (a body is gone)
@@ -639,10 +673,10 @@ fn update_contacts_inner(
     let ContactIndex {
         per_grain, live, ..
     } = index;
-    for (i, j, slot, pair, law) in to_spawn {
-        let contact = (law.spawn)(world, pair, bodies_of(i, j));
-        per_grain[i as usize].push(IndexEntry::new(j, contact, slot));
-        set_live(live, i as usize, slot, true);
+    for (new, law) in to_spawn {
+        let contact = (law.spawn)(world, new.contact, bodies_of(new.key, new.partner));
+        per_grain[new.key as usize].push(IndexEntry::new(new.partner, contact, new.slot));
+        set_live(live, new.key as usize, new.slot, true);
     }
     if world
         .resource::<Clock>()
@@ -1048,6 +1082,43 @@ fn touching(s: &GrainSnapshot, range: f64, key: usize, partner: u32) -> bool {
 /// contact lists (and records).
 const LISTS_AHEAD: usize = 8;
 
+/// The new pair of grain `i` (dense index) and `partner` (a dense index or a wall code)
+/// with its contact and law, or `None` if no law joins their materials.
+fn new_pair(
+    s: &GrainSnapshot,
+    table: &ContactLawTable,
+    i: usize,
+    partner: u32,
+    slot: u32,
+) -> Option<NewPair> {
+    let (b, material_b, kind) = match ContactBodies::wall_of(partner) {
+        Some(w) => {
+            let wall = &s.walls[w];
+            (wall.entity, wall.material, ContactKind::GrainWall)
+        }
+        None => {
+            let j = partner as usize;
+            (s.entity[j], s.material[j], ContactKind::GrainGrain)
+        }
+    };
+    let (law, slot_of_law) = table.slot_of(s.material[i], material_b)?;
+    // The grain first in dense order is `a` (never the entity ids, which depend on the
+    // history of spawns: a restored run must choose alike).
+    let contact = Contact {
+        a: s.entity[i],
+        b,
+        kind,
+        pair_slot: slot_of_law.pair_slot,
+    };
+    Some(NewPair {
+        key: i as u32,
+        partner,
+        slot,
+        law,
+        contact,
+    })
+}
+
 /// How many pairs ahead [`narrow_chunk`] asks for the partners' positions and radii.
 const PARTNERS_AHEAD: usize = 32;
 
@@ -1057,6 +1128,14 @@ const PARTNERS_AHEAD: usize = 32;
 /// `live` clear) four at a time, and each grain against each wall, and lists in `new`
 /// the touching pairs that have no contact yet, ordered by grain, then partner (walls
 /// last), whatever the order of the tests. Not inlined, so that profiles show it.
+///
+/// The pairs go to the first of `lists` with their contacts ([`NewPair`]), so that the
+/// serial handout reads no grain's entity or material; a chunk none of whose candidate
+/// pairs has a contact (every chunk in a run's first narrow phase, which finds every
+/// contact new) lists them bare in the second, 12 bytes a pair instead of 40, and the
+/// handout makes their contacts: those lists hold every contact of the packing at once,
+/// and their memory stays with the process (the 512,000-grain chute's peak resident set
+/// 747 bytes a grain with every pair made here, 727 with these bare).
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn narrow_chunk(
@@ -1065,7 +1144,7 @@ fn narrow_chunk(
     entries: &[GrainContacts],
     candidates: &CandidateChunk,
     live: &[u64],
-    new: &mut Vec<(u32, u32, u32)>,
+    lists: (&mut Vec<NewPair>, &mut Vec<(u32, u32, u32)>),
     ahead: &mut talus_core::snapshot::LinePrefetcher,
 ) {
     let PassState {
@@ -1074,15 +1153,18 @@ fn narrow_chunk(
         range,
         gap_threshold,
     } = *state;
+    let (new, bare) = lists;
     new.clear();
+    bare.clear();
+    let listed_bare = live.iter().all(|&bits| bits == 0);
     // A contact between two frozen grains (zero inverse mass in the snapshot), or a
     // frozen grain and a wall, moves nothing, and its reduced mass (hence a mass-scaled
     // dashpot) would be infinite: none is made.
     let frozen = |i: usize| s.inverse_mass(i) == 0.0;
     // A touching candidate pair reaches here only without a live bit, so it has no
     // contact (the bits are exact: `tests/neighbour_rebuild.rs`); a grain and a wall
-    // (no slot) are looked up in the grain's contacts. The partner's material is looked
-    // up only for a pair with no contact: the materials are an array of their own, which
+    // (no slot) are looked up in the grain's contacts. The partner's material and entity
+    // are looked up only for a pair with no contact: they are arrays of their own, which
     // a large packing's partners would each miss in cache.
     let mut touch = |i: usize, partner: u32, slot: u32| {
         let known = |partner| entries[i - base].iter().any(|e| e.partner == partner);
@@ -1091,12 +1173,16 @@ fn narrow_chunk(
             "a live pair without its bit"
         );
         if slot != NO_SLOT || !known(partner) {
-            let material_b = match ContactBodies::wall_of(partner) {
-                Some(w) => s.walls[w].material,
-                None => s.material[partner as usize],
-            };
-            if table.get(s.material[i], material_b).is_some() {
-                new.push((i as u32, partner, slot));
+            if listed_bare {
+                let material_b = match ContactBodies::wall_of(partner) {
+                    Some(w) => s.walls[w].material,
+                    None => s.material[partner as usize],
+                };
+                if table.get(s.material[i], material_b).is_some() {
+                    bare.push((i as u32, partner, slot));
+                }
+            } else if let Some(pair) = new_pair(s, table, i, partner, slot) {
+                new.push(pair);
             }
         }
     };
@@ -1168,5 +1254,6 @@ fn narrow_chunk(
     // By grain, then partner (wall codes after every grain's index), as one pass over
     // the grains in index order would list them: where and when the list was built never
     // shows in the order contacts are made (and forces summed).
-    new.sort_unstable();
+    new.sort_unstable_by_key(|pair| (pair.key, pair.partner, pair.slot));
+    bare.sort_unstable();
 }

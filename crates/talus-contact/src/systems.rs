@@ -108,6 +108,15 @@ impl ContactLawTable {
             .and_then(|s| s.as_ref())
     }
 
+    /// The law slot of a material pair with its index in [`Self::slots`], where a list
+    /// of pairs can keep it as a number.
+    #[inline]
+    pub fn slot_of(&self, a: u16, b: u16) -> Option<(u32, &LawSlot)> {
+        let index = a as usize * self.n_materials + b as usize;
+        let slot = self.slots.get(index)?.as_ref()?;
+        Some((index as u32, slot))
+    }
+
     /// The slot of the law whose contacts make up `archetype` (any of its material pairs:
     /// they share the law's spawn, recycling and history functions).
     pub fn by_archetype(&self, archetype: bevy_ecs::archetype::ArchetypeId) -> Option<&LawSlot> {
