@@ -1173,17 +1173,9 @@ fn narrow_chunk(
             "a live pair without its bit"
         );
         if slot != NO_SLOT || !known(partner) {
-            if listed_bare {
-                let material_b = match ContactBodies::wall_of(partner) {
-                    Some(w) => s.walls[w].material,
-                    None => s.material[partner as usize],
-                };
-                if table.get(s.material[i], material_b).is_some() {
-                    bare.push((i as u32, partner, slot));
-                }
-            } else if let Some(pair) = new_pair(s, table, i, partner, slot) {
-                new.push(pair);
-            }
+            // Listed bare first in any case: the contacts are made below, in a loop that
+            // asks ahead for the grains' entities and materials.
+            bare.push((i as u32, partner, slot));
         }
     };
     let tested = candidates.within_threshold(gap_threshold);
@@ -1254,6 +1246,32 @@ fn narrow_chunk(
     // By grain, then partner (wall codes after every grain's index), as one pass over
     // the grains in index order would list them: where and when the list was built never
     // shows in the order contacts are made (and forces summed).
-    new.sort_unstable_by_key(|pair| (pair.key, pair.partner, pair.slot));
     bare.sort_unstable();
+    if listed_bare {
+        // Only the pairs some law joins.
+        bare.retain(|&(i, partner, _)| {
+            let material_b = match ContactBodies::wall_of(partner) {
+                Some(w) => s.walls[w].material,
+                None => s.material[partner as usize],
+            };
+            table.get(s.material[i as usize], material_b).is_some()
+        });
+        return;
+    }
+    // The pairs' grains lie all over the chunk's reach, their entities and materials in
+    // arrays of their own: all are asked for before the first is read (a chunk of a
+    // flowing packing lists a few pairs a step), so that their misses overlap.
+    for &(i, j, _) in bare.iter() {
+        prefetch_item(&s.entity, i as usize);
+        prefetch_item(&s.material, i as usize);
+        if ContactBodies::wall_of(j).is_none() {
+            prefetch_item(&s.entity, j as usize);
+            prefetch_item(&s.material, j as usize);
+        }
+    }
+    new.extend(
+        bare.iter()
+            .filter_map(|&(i, partner, slot)| new_pair(s, table, i as usize, partner, slot)),
+    );
+    bare.clear();
 }
