@@ -1249,13 +1249,7 @@ fn narrow_chunk(
     bare.sort_unstable();
     if listed_bare {
         // Only the pairs some law joins.
-        bare.retain(|&(i, partner, _)| {
-            let material_b = match ContactBodies::wall_of(partner) {
-                Some(w) => s.walls[w].material,
-                None => s.material[partner as usize],
-            };
-            table.get(s.material[i as usize], material_b).is_some()
-        });
+        bare.retain(|&(i, partner, slot)| new_pair(s, table, i as usize, partner, slot).is_some());
         return;
     }
     // The pairs' grains lie all over the chunk's reach, their entities and materials in
