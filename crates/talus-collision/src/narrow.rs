@@ -1135,7 +1135,7 @@ const PARTNERS_AHEAD: usize = 32;
 /// contact new) lists them bare in the second, 12 bytes a pair instead of 40, and the
 /// handout makes their contacts: those lists hold every contact of the packing at once,
 /// and their memory stays with the process (the 512,000-grain chute's peak resident set
-/// 747 bytes a grain with every pair made here, 727 with these bare).
+/// 747 bytes a grain with every pair made here, 727–728 with these bare).
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn narrow_chunk(

@@ -229,8 +229,11 @@ pub struct ContactEnergyPartials {
 #[derive(Resource, Clone, Debug, Default)]
 pub struct ChunkGrainMasks {
     /// Per table: the address and length of its bodies column, which name the table
-    /// within a pass, and one mask per chunk of rows in table order.
-    tables: Vec<(usize, usize, Vec<u64>)>,
+    /// within a pass, and where its masks lie in [`Self::masks`].
+    tables: Vec<(usize, usize, std::ops::Range<usize>)>,
+    /// Every recorded table's masks, one per chunk of rows in table order, kept in one
+    /// list whose room outlives the pass (no allocation a step).
+    masks: Vec<u64>,
 }
 
 impl ChunkGrainMasks {
@@ -269,10 +272,12 @@ impl ChunkGrainMasks {
 
     /// Records the chunks' masks of the table whose bodies column is `bodies`, replacing
     /// any earlier record of it.
-    pub fn record(&mut self, bodies: &[ContactBodies], masks: Vec<u64>) {
+    pub fn record(&mut self, bodies: &[ContactBodies], masks: impl IntoIterator<Item = u64>) {
         let key = (bodies.as_ptr() as usize, bodies.len());
         self.tables.retain(|t| (t.0, t.1) != key);
-        self.tables.push((key.0, key.1, masks));
+        let start = self.masks.len();
+        self.masks.extend(masks);
+        self.tables.push((key.0, key.1, start..self.masks.len()));
     }
 
     /// The chunks' masks of the table whose bodies column is `bodies`, if this pass's
@@ -282,12 +287,13 @@ impl ChunkGrainMasks {
         self.tables
             .iter()
             .find(|t| (t.0, t.1) == key)
-            .map(|t| &t.2[..])
+            .map(|t| &self.masks[t.2.clone()])
     }
 
     /// Forgets every table's masks (the pass they describe is over).
     pub fn clear(&mut self) {
         self.tables.clear();
+        self.masks.clear();
     }
 }
 

@@ -344,7 +344,7 @@ pub fn evaluate_law<L: ContactLaw>(
                     }),
             );
             if mask_shift.is_some() {
-                grain_masks.record(d, outcomes.iter().map(|o| o.2).collect());
+                grain_masks.record(d, outcomes.iter().map(|o| o.2));
             }
         }
         for (sums, pairs, _) in outcomes.drain(..) {
@@ -1464,8 +1464,7 @@ mod tests {
         for (bodies, _) in &tables {
             let chunks = bodies
                 .chunks(ENERGY_CHUNK_LEN)
-                .map(|rows| ChunkGrainMasks::of_rows(rows, shift))
-                .collect();
+                .map(|rows| ChunkGrainMasks::of_rows(rows, shift));
             masks.record(bodies, chunks);
         }
         let mut force = vec![Force(DVec3::NAN); len];
