@@ -126,3 +126,33 @@ fn new_contacts_take_ended_rows_of_their_own_region() {
         "runs of rows by region: {vacant_rows} with vacant rows, {by_region} without"
     );
 }
+
+/// The narrow phase hands ended contacts to new pairs region by region, the regions in
+/// parallel, and enters what each region's pairs took in region order, which is the
+/// pairs' order: the chute (two regions of [`REGION_GRAINS`]) ends the same, grains,
+/// contacts and energies, through two contact-table sorts, as with one job over every
+/// region, and on 1, 2 and 3 threads.
+#[test]
+fn the_chute_hands_out_contacts_alike_by_region_and_on_any_number_of_threads() {
+    let text = chute_text();
+    let on = |threads: usize, one_job: bool| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            run_with(&text, 59, move |world| {
+                world.resource_mut::<ContactIndex>().handout_in_one_job = one_job;
+            })
+        })
+    };
+    let (one_job, contacts) = on(2, true);
+    assert!(contacts > 10_000, "the chute flows with its contacts");
+    for threads in [1, 2, 3] {
+        let (by_region, _) = on(threads, false);
+        assert!(
+            by_region == one_job,
+            "the handout by region on {threads} threads changed the results"
+        );
+    }
+}
