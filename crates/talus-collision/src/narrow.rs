@@ -1123,6 +1123,7 @@ fn end_idle_contacts(
         (local < len).then_some((key, partner, local))
     };
     let mut ended = Vec::new();
+    let mut ended_contacts: Vec<(Entity, u32)> = Vec::new();
     // The pairs' grains and contact lists are all over the packing: each pair asks for
     // those of the pair a few ahead.
     let mut ahead = pairs.iter().filter_map(keyed_here).skip(LISTS_AHEAD);
@@ -1139,9 +1140,17 @@ fn end_idle_contacts(
         if let Some(k) = entries.iter().position(|e| e.partner == partner) {
             let entry = entries.remove(k);
             set_live(live, local, entry.slot, false);
-            ended.push(ended_row(world, entry.contact(), region_of(key), key));
+            ended_contacts.push((entry.contact(), key));
         }
     }
+    // The ended contacts' rows, in a loop of their own: each lookup waits on the entity's
+    // record, but none waits on another, so the core has several in flight (inside the loop
+    // above each waited behind its pair's test and list search).
+    ended.extend(
+        ended_contacts
+            .iter()
+            .map(|&(contact, key)| ended_row(world, contact, region_of(key), key)),
+    );
     ended
 }
 
