@@ -535,8 +535,7 @@ fn update_contacts_inner(
     } else {
         chunks
     };
-    let reusable_view = &reusable;
-    let ended_view = &ended_at;
+    let (reusable_view, ended_view) = (&reusable, &ended_at);
     let mut parts: Vec<RegionHandout> = Vec::new();
     per_grain[..n]
         .par_chunks_mut(job_chunks * CHUNK)
@@ -560,36 +559,24 @@ fn update_contacts_inner(
             )
         })
         .collect_into_vec(&mut parts);
+    // Gives ended contact `k` of `group` to a new pair; returns the contact.
+    let mut take = |group: &mut Reusable, k: usize, new: &NewPair| {
+        let (_, _, row, contact, _) = ended_at[k];
+        reused[k] = true;
+        group
+            .reuses
+            .push((contact, row, new.contact, bodies_of(new.key, new.partner)));
+        contact
+    };
     for part in parts {
         for (group, at, k, new) in part.handed {
-            let (_, _, row, contact, _) = ended_at[k];
-            reused[k] = true;
             let group = &mut reusable[group];
             group.by_region[at].next = k + 1;
-            group
-                .reuses
-                .push((contact, row, new.contact, bodies_of(new.key, new.partner)));
+            take(group, k, &new);
         }
         to_spawn.extend(part.no_law_group);
         unplaced.extend(part.unplaced);
     }
-    let mut hand_out =
-        |per_grain: &mut [GrainContacts], live: &mut [Vec<u64>], group: &mut Reusable, k, new| {
-            let NewPair {
-                key,
-                partner,
-                slot,
-                contact: pair,
-                ..
-            } = new;
-            let (_, _, row, contact, _) = ended_at[k];
-            reused[k] = true;
-            group
-                .reuses
-                .push((contact, row, pair, bodies_of(key, partner)));
-            per_grain[key as usize].push(IndexEntry::new(partner, contact, slot));
-            set_live(live, key as usize, slot, true);
-        };
     // The pairs whose region had no ended contact left take those of other regions, in
     // order, and are spawned when none is left.
     for (new, law) in unplaced {
@@ -609,7 +596,8 @@ fn update_contacts_inner(
             Some(run) => {
                 let k = run.next;
                 run.next += 1;
-                hand_out(per_grain, live, group, k, new);
+                let contact = take(group, k, &new);
+                enter_pair(per_grain, live, new.key as usize, &new, contact);
             }
             None => to_spawn.push((new, law)),
         }
@@ -677,8 +665,7 @@ fn update_contacts_inner(
     } = index;
     for (new, law) in to_spawn {
         let contact = (law.spawn)(world, new.contact, bodies_of(new.key, new.partner));
-        per_grain[new.key as usize].push(IndexEntry::new(new.partner, contact, new.slot));
-        set_live(live, new.key as usize, new.slot, true);
+        enter_pair(per_grain, live, new.key as usize, &new, contact);
     }
     if world
         .resource::<Clock>()
@@ -785,15 +772,27 @@ fn hand_out_region<'a>(
                 let k = next[g][at];
                 next[g][at] += 1;
                 let (_, _, _, contact, _) = ended_at[k];
-                let local = new.key as usize - first;
-                lists[local].push(IndexEntry::new(new.partner, contact, new.slot));
-                set_live(live, local, new.slot, true);
+                enter_pair(lists, live, new.key as usize - first, &new, contact);
                 out.handed.push((g, at, k, new));
             }
             None => out.unplaced.push((new, law)),
         }
     }
     out
+}
+
+/// Enters new pair `new`, given `contact`, in its key's contact list, `lists[local]`, and
+/// sets its live bit (`lists` and `live` start at the same chunk of grains).
+#[inline]
+fn enter_pair(
+    lists: &mut [GrainContacts],
+    live: &mut [Vec<u64>],
+    local: usize,
+    new: &NewPair,
+    contact: Entity,
+) {
+    lists[local].push(IndexEntry::new(new.partner, contact, new.slot));
+    set_live(live, local, new.slot, true);
 }
 
 /// The key of a row that was vacant before the pass.
