@@ -2,6 +2,8 @@
 
 use bevy_ecs::prelude::*;
 use glam::DVec3;
+use rayon::prelude::*;
+use talus_core::counting::counting_sort;
 use talus_core::periodic::{LeesEdwards, PeriodicBox};
 use talus_core::snapshot::GrainSnapshot;
 
@@ -26,8 +28,10 @@ pub struct CellGrid {
     pub cell_of: Vec<u32>,
     /// Interaction range beyond touch (r_c), m. Default: 0.
     pub interaction_range: f64,
-    cursor: Vec<u32>,
 }
+
+/// Grains a job of the grid's parallel passes takes at the least.
+const GRID_CHUNK: usize = 4096;
 
 impl CellGrid {
     /// Cell coordinates of a position (clamped into the grid).
@@ -72,12 +76,18 @@ impl CellGrid {
     /// a neighbour list's skin).
     pub fn rebuild_with_margin(&mut self, s: &GrainSnapshot, margin: f64) {
         let n = s.len();
-        let mut lo = DVec3::splat(f64::INFINITY);
-        let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for g in &s.records {
-            lo = lo.min(g.position);
-            hi = hi.max(g.position);
-        }
+        // Minima and maxima are exact, so the chunks' bounds combine to the same bits in
+        // any order.
+        let bounds = |records: &[talus_core::snapshot::GrainRecord]| {
+            records.iter().fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), g| (lo.min(g.position), hi.max(g.position)),
+            )
+        };
+        let (mut lo, mut hi) = s.records.par_chunks(GRID_CHUNK).map(bounds).reduce(
+            || (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo_a, hi_a), (lo_b, hi_b)| (lo_a.min(lo_b), hi_a.max(hi_b)),
+        );
         if n == 0 || !lo.is_finite() || !hi.is_finite() {
             lo = DVec3::ZERO;
             hi = DVec3::ZERO;
@@ -119,34 +129,30 @@ impl CellGrid {
         self.origin = lo;
         let cell = self.cell;
         let total = self.dims[0] * self.dims[1] * self.dims[2];
-        self.cell_of.clear();
-        self.cell_of.extend(s.records.iter().map(|g| {
+        let dims = self.dims;
+        let cell_of = |g: &talus_core::snapshot::GrainRecord| {
             let q = (g.position - lo) / cell;
             let c = [
-                (q.x as usize).min(self.dims[0] - 1),
-                (q.y as usize).min(self.dims[1] - 1),
-                (q.z as usize).min(self.dims[2] - 1),
+                (q.x as usize).min(dims[0] - 1),
+                (q.y as usize).min(dims[1] - 1),
+                (q.z as usize).min(dims[2] - 1),
             ];
-            (c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])) as u32
-        }));
-        self.cell_start.clear();
-        self.cell_start.resize(total + 1, 0);
-        for &c in &self.cell_of {
-            self.cell_start[c as usize + 1] += 1;
-        }
-        for c in 0..total {
-            self.cell_start[c + 1] += self.cell_start[c];
-        }
+            (c[0] + dims[0] * (c[1] + dims[1] * c[2])) as u32
+        };
+        self.cell_of.clear();
+        self.cell_of
+            .par_extend(s.records.par_iter().with_min_len(GRID_CHUNK).map(cell_of));
         self.sorted.clear();
         self.sorted.resize(n, 0);
-        // Fill in grain order: within a cell grains stay sorted by dense index.
-        self.cursor.clear();
-        self.cursor.extend_from_slice(&self.cell_start[..total]);
-        for i in 0..n {
-            let c = self.cell_of[i] as usize;
-            self.sorted[self.cursor[c] as usize] = i as u32;
-            self.cursor[c] += 1;
-        }
+        // Stable: within a cell grains stay sorted by dense index.
+        let cells = &self.cell_of;
+        counting_sort(
+            n,
+            total,
+            |i| cells[i] as usize,
+            &mut self.cell_start,
+            &mut self.sorted,
+        );
     }
 }
 

@@ -30,8 +30,10 @@ impl Plugin for CollisionPlugin {
     }
 
     fn build(&self, sim: &mut SimBuilder) {
-        let mut grid = CellGrid::default();
-        grid.interaction_range = self.interaction_range;
+        let grid = CellGrid {
+            interaction_range: self.interaction_range,
+            ..CellGrid::default()
+        };
         sim.world.insert_resource(grid);
         sim.world.insert_resource(ContactIndex::default());
         sim.world.insert_resource(NeighbourList::default());

@@ -13,6 +13,8 @@
 //! and history move together, bit for bit.
 
 use bevy_ecs::prelude::*;
+use rayon::prelude::*;
+use talus_core::counting::counting_sort;
 use talus_core::snapshot::{GrainSnapshot, prefetch_item};
 
 use crate::components::*;
@@ -31,6 +33,9 @@ pub struct ContactTableSorts(pub Vec<(&'static str, ContactTableSort)>);
 /// [`ContactForce`], [`ContactBodies`] and the law's [`LawState`]. A table whose contacts
 /// carry anything more is not sorted, since its extra column would not move with them.
 const CONTACT_COMPONENTS: usize = 5;
+
+/// Grains whose groups of contacts one job of a sort orders by second body.
+const GROUP_GRAINS: usize = 4096;
 
 /// Sorts law `L`'s contact table so that row order is the order of (first body's dense
 /// index, second body's dense index or wall code), and brings every contact's
@@ -100,37 +105,47 @@ fn sort_rows<H: Send + Sync + 'static>(
         }
     }
     let key = |b: &ContactBodies| (u64::from(b.a) << 32) | u64::from(b.b);
-    if bodies.is_sorted_by_key(key) {
+    if bodies.par_windows(2).all(|w| key(&w[0]) <= key(&w[1])) {
         return 0;
     }
     // Row r receives the contents of row order[r]: a counting sort by first body (two
-    // sequential passes, no comparison), then each first body's few contacts by second
-    // body. Stable, so two rows with one key (no valid table has any) keep their order.
-    let mut start = vec![0u32; s.len() + 1];
-    for b in bodies.iter() {
-        start[b.a as usize + 1] += 1;
-    }
-    for k in 1..start.len() {
-        start[k] += start[k - 1];
-    }
+    // sequential passes, no comparison, each thread over a range of grains), then each
+    // first body's few contacts by second body. Stable, so two rows with one key (no
+    // valid table has any) keep their order.
+    let mut start = Vec::new();
     let mut order = vec![0u32; bodies.len()];
-    for (row, b) in bodies.iter().enumerate() {
-        let slot = &mut start[b.a as usize];
-        order[*slot as usize] = row as u32;
-        *slot += 1;
+    let first_bodies = &*bodies;
+    counting_sort(
+        bodies.len(),
+        s.len(),
+        |row| first_bodies[row].a as usize,
+        &mut start,
+        &mut order,
+    );
+    // Grain a's group is order[start[a]..start[a + 1]]: the groups of each chunk of
+    // grains are sorted by one job.
+    let mut pieces: Vec<(usize, &mut [u32])> = Vec::with_capacity(s.len().div_ceil(GROUP_GRAINS));
+    let mut rest = &mut order[..];
+    for first in (0..s.len()).step_by(GROUP_GRAINS) {
+        let end = (first + GROUP_GRAINS).min(s.len());
+        let (piece, others) = rest.split_at_mut((start[end] - start[first]) as usize);
+        pieces.push((first, piece));
+        rest = others;
     }
-    // Now start[a] is where grain a's group ends, and the next one begins.
-    let mut begin = 0;
-    for &end in &start[..s.len()] {
-        let group = &mut order[begin..end as usize];
-        if group.len() > 1 {
-            group.sort_by_key(|&row| bodies[row as usize].b);
+    let (starts, rows) = (&start, &*bodies);
+    pieces.into_par_iter().for_each(|(first, piece)| {
+        let base = starts[first];
+        let end = (first + GROUP_GRAINS).min(starts.len() - 1);
+        for a in first..end {
+            let group = &mut piece[(starts[a] - base) as usize..(starts[a + 1] - base) as usize];
+            if group.len() > 1 {
+                group.sort_by_key(|&row| rows[row as usize].b);
+            }
         }
-        begin = end as usize;
-    }
+    });
     drop(start);
     let moved = order
-        .iter()
+        .par_iter()
         .enumerate()
         .filter(|&(row, &from)| row != from as usize)
         .count();

@@ -5,6 +5,7 @@
 //! rebuilt from the entities every step, so the entities stay the source of truth.
 
 pub mod components;
+pub mod counting;
 pub mod energy;
 pub mod gear;
 pub mod grain_order;

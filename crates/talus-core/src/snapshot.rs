@@ -203,8 +203,12 @@ impl GrainSnapshot {
     /// [`Self::move_bound_sq`] (the neighbour list does at each build).
     pub fn mark_move_reference(&mut self) {
         self.move_reference.clear();
-        self.move_reference
-            .extend(self.records.iter().map(|g| g.position));
+        self.move_reference.par_extend(
+            self.records
+                .par_iter()
+                .with_min_len(COPY_CHUNK)
+                .map(|g| g.position),
+        );
         self.moves = Moves::still();
         self.block_moves.clear();
         self.block_moves
