@@ -1193,38 +1193,48 @@ fn sum_range(
         let k = (body as usize).wrapping_sub(first);
         if k < len { k } else { usize::MAX }
     };
+    // Adds the sides in range of every row of `bodies`, from the last row to the first, a
+    // branch per side (predicted where nearly every side is in range), setting the totals
+    // as the scan reaches them.
+    let add_rows = |bodies: &[ContactBodies],
+                    forces: &[ContactForce],
+                    force: &mut [Force],
+                    torque: &mut [Torque],
+                    set_from: &mut usize| {
+        for (block, rows) in bodies.chunks(START_BLOCK).enumerate().rev() {
+            if *set_from > 0 {
+                let low = rows.iter().map(|b| offset(b.a).min(offset(b.b))).min();
+                if let Some(low) = low.filter(|&l| l < *set_from) {
+                    let from = low.saturating_sub(START_LEAD);
+                    start(force, torque, from, *set_from);
+                    *set_from = from;
+                }
+            }
+            let block_start = block * START_BLOCK;
+            for (row, b) in rows.iter().enumerate().rev() {
+                let row = block_start + row;
+                // The table is in the order of its first bodies, so the first sides'
+                // totals are read in order; the second bodies' are not, and miss a
+                // core's own cache: ask for them a few contacts ahead (below).
+                if let Some(ahead) = row.checked_sub(SUM_AHEAD).map(|r| &bodies[r]) {
+                    let j = (ahead.b as usize).wrapping_sub(first);
+                    prefetch_item(force, j);
+                    prefetch_item(torque, j);
+                }
+                let f = &forces[row];
+                if in_range(b.b) {
+                    add(force, torque, b, f, true);
+                }
+                if in_range(b.a) {
+                    add(force, torque, b, f, false);
+                }
+            }
+        }
+    };
     // Listed rows are taken by picking.
     if !pick && rows.is_none() {
         for &(bodies, forces) in tables.iter().rev() {
-            for (block, rows) in bodies.chunks(START_BLOCK).enumerate().rev() {
-                if set_from > 0 {
-                    let low = rows.iter().map(|b| offset(b.a).min(offset(b.b))).min();
-                    if let Some(low) = low.filter(|&l| l < set_from) {
-                        let from = low.saturating_sub(START_LEAD);
-                        start(force, torque, from, set_from);
-                        set_from = from;
-                    }
-                }
-                let block_start = block * START_BLOCK;
-                for (row, b) in rows.iter().enumerate().rev() {
-                    let row = block_start + row;
-                    // The table is in the order of its first bodies, so the first sides'
-                    // totals are read in order; the second bodies' are not, and miss a
-                    // core's own cache: ask for them a few contacts ahead (below).
-                    if let Some(ahead) = row.checked_sub(SUM_AHEAD).map(|r| &bodies[r]) {
-                        let j = (ahead.b as usize).wrapping_sub(first);
-                        prefetch_item(force, j);
-                        prefetch_item(torque, j);
-                    }
-                    let f = &forces[row];
-                    if in_range(b.b) {
-                        add(force, torque, b, f, true);
-                    }
-                    if in_range(b.a) {
-                        add(force, torque, b, f, false);
-                    }
-                }
-            }
+            add_rows(bodies, forces, force, torque, &mut set_from);
         }
         // Grains no contact touches.
         start(force, torque, 0, set_from);
@@ -1270,28 +1280,7 @@ fn sum_range(
                         .all(|&c| c & !inside_mask == 0)
                 });
             if direct {
-                if set_from > 0 {
-                    let low = bodies.iter().map(|b| offset(b.a).min(offset(b.b))).min();
-                    if let Some(low) = low.filter(|&l| l < set_from) {
-                        let from = low.saturating_sub(START_LEAD);
-                        start(force, torque, from, set_from);
-                        set_from = from;
-                    }
-                }
-                for (row, b) in bodies.iter().enumerate().rev() {
-                    if let Some(ahead) = row.checked_sub(SUM_AHEAD).map(|r| &bodies[r]) {
-                        let j = (ahead.b as usize).wrapping_sub(first);
-                        prefetch_item(force, j);
-                        prefetch_item(torque, j);
-                    }
-                    let f = &forces[row];
-                    if in_range(b.b) {
-                        add(force, torque, b, f, true);
-                    }
-                    if in_range(b.a) {
-                        add(force, torque, b, f, false);
-                    }
-                }
+                add_rows(bodies, forces, force, torque, &mut set_from);
                 continue;
             }
             let mut count = 0;
