@@ -241,51 +241,56 @@ pub fn run_scene(
     } else {
         samples.push(ReportSample::take(&sim.world));
         keep_last_good(&mut last_good, &mut sim.world, &built.name, options.quiet);
-        for step in sim.step_count() + 1..=total_steps {
-            let due = kinetic_due(step);
-            sim.world.resource_mut::<KineticEnergyDue>().0 = due;
-            let step_start = Instant::now();
-            // A step whose end is neither reported nor recorded may leave its second kick
-            // to the next step (one pass over the grains fewer, the same bits).
-            let stepped = if due {
-                sim.step()
-            } else {
-                sim.step_before_another()
-            };
-            stepping += step_start.elapsed().as_secs_f64();
-            if let Err(b) = stepped {
-                sim.synchronize();
-                blow_up = Some(b);
-                break;
-            }
-            if step % progress_every == 0 {
-                progress.set_position(step);
-                progress.set_message(format!("{:.4} s", sim.time()));
-            }
-            let requested = sim.world.resource::<StopRequest>().0.clone();
-            if step % report_every == 0 || step == total_steps || requested.is_some() {
-                if !due {
-                    // A stop asked for at a step that was not to be reported.
+        // The pool's other workers poll for work through the whole loop, not only through
+        // each step: between two steps they went back to rayon's idle loop and joined the
+        // next step's first parallel loop some 10 µs late (`with_workers_polling`).
+        talus_core::workers::with_workers_polling(|| {
+            for step in sim.step_count() + 1..=total_steps {
+                let due = kinetic_due(step);
+                sim.world.resource_mut::<KineticEnergyDue>().0 = due;
+                let step_start = Instant::now();
+                // A step whose end is neither reported nor recorded may leave its second kick
+                // to the next step (one pass over the grains fewer, the same bits).
+                let stepped = if due {
+                    sim.step()
+                } else {
+                    sim.step_before_another()
+                };
+                stepping += step_start.elapsed().as_secs_f64();
+                if let Err(b) = stepped {
                     sim.synchronize();
-                    talus_core::integrate::sum_kinetic_energy(&mut sim.world);
-                }
-                let sample = ReportSample::take(&sim.world);
-                let settled = built
-                    .stop
-                    .settle_kinetic_energy
-                    .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
-                samples.push(sample);
-                keep_last_good(&mut last_good, &mut sim.world, &built.name, options.quiet);
-                if let Some(reason) = requested {
-                    stopped = reason;
+                    blow_up = Some(b);
                     break;
                 }
-                if settled {
-                    stopped = "settled".into();
-                    break;
+                if step % progress_every == 0 {
+                    progress.set_position(step);
+                    progress.set_message(format!("{:.4} s", sim.time()));
+                }
+                let requested = sim.world.resource::<StopRequest>().0.clone();
+                if step % report_every == 0 || step == total_steps || requested.is_some() {
+                    if !due {
+                        // A stop asked for at a step that was not to be reported.
+                        sim.synchronize();
+                        talus_core::integrate::sum_kinetic_energy(&mut sim.world);
+                    }
+                    let sample = ReportSample::take(&sim.world);
+                    let settled = built
+                        .stop
+                        .settle_kinetic_energy
+                        .is_some_and(|e| sample.kinetic() / built.grain_count as f64 <= e);
+                    samples.push(sample);
+                    keep_last_good(&mut last_good, &mut sim.world, &built.name, options.quiet);
+                    if let Some(reason) = requested {
+                        stopped = reason;
+                        break;
+                    }
+                    if settled {
+                        stopped = "settled".into();
+                        break;
+                    }
                 }
             }
-        }
+        });
     }
     // The last step is always reported; whatever ended the loop, the state is the last
     // step's end.

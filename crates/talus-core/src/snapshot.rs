@@ -906,7 +906,7 @@ impl GrainSnapshot {
         let (periodic_box, image) = (self.periodic, self.image);
         // Both scratch lists are kept between steps for their allocations.
         let mut block_moves = std::mem::take(&mut self.block_scratch);
-        let mut chunk_results = std::mem::take(&mut self.chunk_scratch);
+        let chunk_results = std::mem::take(&mut self.chunk_scratch);
         block_moves.clear();
         if track_moves {
             block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
@@ -932,63 +932,82 @@ impl GrainSnapshot {
                 SmallVec::new()
             }
         };
-        let mut work = 0.0;
-        let mut kicked: SmallVec<[std::ops::Range<usize>; 4]> = SmallVec::new();
-        let mut merge = |blocks: SmallVec<[(usize, Moves); 20]>| {
-            for (block, moves) in blocks {
-                block_moves[block] = block_moves[block].merge(moves);
-            }
-        };
-        for (entities, forces, masses) in moving {
-            let range = self.table_range(entities);
-            let table_start = range.start;
-            kicked.push(range.clone());
-            let records = &mut self.records[range];
-            let one_chunk = |c: usize, records: &mut [GrainRecord], f: &[Force], m: &[Mass]| {
-                let work = update(records, f, m);
-                (work, wrap_and_measure(table_start, c * chunk, records))
-            };
-            if records.len() >= parallel_from {
-                let chunks = records
-                    .par_chunks_mut(chunk)
-                    .zip(forces.par_chunks(chunk).zip(masses.par_chunks(chunk)));
-                chunk_results.clear();
-                chunk_results.par_extend(
-                    chunks
-                        .enumerate()
-                        .map(|(c, (records, (f, m)))| one_chunk(c, records, f, m)),
-                );
-                work += chunk_results.iter().map(|&(work, _)| work).sum::<f64>();
-                chunk_results
-                    .drain(..)
-                    .for_each(|(_, blocks)| merge(blocks));
-            } else {
-                let (chunk_work, blocks) = one_chunk(0, records, forces, masses);
-                work += chunk_work;
-                merge(blocks);
-            }
+        // The kicked tables' ranges, each with its forces and masses, and the grains
+        // between and after them, which are only wrapped and measured: one parallel loop
+        // over the chunks of both, so that no thread waits while another wraps the grains
+        // the kick leaves alone (the frozen base of a chute) on its own.
+        // A piece: its grains, and for a kicked table its number, forces and masses.
+        type Piece<'f> = (
+            std::ops::Range<usize>,
+            Option<(usize, &'f [Force], &'f [Mass])>,
+        );
+        let mut pieces: Vec<Piece> = Vec::new();
+        for (k, (entities, forces, masses)) in moving.enumerate() {
+            pieces.push((self.table_range(entities), Some((k, forces, masses))));
         }
-        // The rest: the grains between and after the kicked tables.
-        kicked.sort_by_key(|r| r.start);
-        let mut left = Vec::new();
+        let kicked_tables = pieces.len();
+        pieces.sort_by_key(|(range, _)| range.start);
         let mut at = 0;
-        for range in kicked.iter().chain(std::iter::once(&(n..n))) {
+        let mut left = Vec::new();
+        for (range, _) in pieces.iter().chain(std::iter::once(&(n..n, None))) {
             if at < range.start {
-                left.push(at..range.start);
+                left.push((at..range.start, None));
             }
             at = at.max(range.end);
         }
         if wrap.is_some() || track_moves {
-            for range in left {
-                let table_start = range.start;
-                let chunks = self.records[range].par_chunks_mut(COPY_CHUNK).enumerate();
-                chunk_results.clear();
-                chunk_results.par_extend(chunks.map(|(c, records)| {
-                    (0.0, wrap_and_measure(table_start, c * COPY_CHUNK, records))
-                }));
-                chunk_results
-                    .drain(..)
-                    .for_each(|(_, blocks)| merge(blocks));
+            pieces.extend(left);
+            pieces.sort_by_key(|(range, _)| range.start);
+        }
+        // Each piece's records cut into chunks: (the kicked table's number and its
+        // chunk's forces and masses, the piece's start, the chunk's first grain in it,
+        // the chunk's records). A kicked table shorter than `parallel_from` is one chunk.
+        type Job<'r, 'f> = (
+            Option<(usize, &'f [Force], &'f [Mass])>,
+            usize,
+            usize,
+            &'r mut [GrainRecord],
+        );
+        let mut jobs: Vec<Job> = Vec::new();
+        let mut rest = &mut self.records[..];
+        let mut at = 0;
+        for (range, kicked) in pieces {
+            let (_, tail) = rest.split_at_mut(range.start - at);
+            let (records, tail) = tail.split_at_mut(range.len());
+            (rest, at) = (tail, range.end);
+            let size = match kicked {
+                Some(_) if records.len() < parallel_from => records.len().max(1),
+                _ => chunk,
+            };
+            for (c, records) in records.chunks_mut(size).enumerate() {
+                let (from, to) = (c * size, c * size + records.len());
+                let kicked = kicked.map(|(k, f, m)| (k, &f[from..to], &m[from..to]));
+                jobs.push((kicked, range.start, from, records));
+            }
+        }
+        let one_chunk = |(kicked, table_start, from, records): Job| {
+            let work = kicked.map(|(k, f, m)| (k, update(records, f, m)));
+            (work, wrap_and_measure(table_start, from, records))
+        };
+        type JobResult = (Option<(usize, f64)>, SmallVec<[(usize, Moves); 20]>);
+        let mut results: Vec<JobResult> = Vec::with_capacity(jobs.len());
+        if n >= parallel_from {
+            results.par_extend(jobs.into_par_iter().map(one_chunk));
+        } else {
+            results.extend(jobs.into_iter().map(one_chunk));
+        }
+        // The work of gravity table by table, in the order the tables came, each table's
+        // chunks summed in order (a sum of one term is the term: it starts from -0.0).
+        let mut work = 0.0;
+        for table in 0..kicked_tables {
+            work += results
+                .iter()
+                .filter_map(|(kicked, _)| kicked.filter(|&(k, _)| k == table).map(|(_, w)| w))
+                .sum::<f64>();
+        }
+        for (_, blocks) in results {
+            for (block, moves) in blocks {
+                block_moves[block] = block_moves[block].merge(moves);
             }
         }
         self.finish_moves(block_moves, chunk_results);
