@@ -278,16 +278,20 @@ fn first_in_order(grain: u32, other: u32) -> (u32, u32) {
 /// each wall) for touch, creates contact entities for new touching pairs (with the law
 /// of their material pair) and removes those whose pair no longer touches.
 pub fn update_contacts(world: &mut World) {
-    world.resource_scope(|world, mut index: Mut<ContactIndex>| {
-        world.resource_scope(|world, table: Mut<ContactLawTable>| {
-            world.resource_scope(|world, snapshot: Mut<GrainSnapshot>| {
-                world.resource_scope(|world, list: Mut<NeighbourList>| {
-                    let range = world.resource::<CellGrid>().interaction_range;
-                    update_contacts_inner(world, &mut index, &table, &snapshot, &list, range);
-                });
-            });
-        });
-    });
+    // The resources the pass reads beside the world are moved out for its duration, each
+    // leaving its empty default, and moved back: `World::resource_scope` takes a resource's
+    // component off its entity and puts it back, moving the entity between archetypes
+    // twice, and four such scopes cost 7–8 µs a step, serial (32,000-grain chute).
+    let mut index = std::mem::take(&mut *world.resource_mut::<ContactIndex>());
+    let table = std::mem::take(&mut *world.resource_mut::<ContactLawTable>());
+    let snapshot = std::mem::take(&mut *world.resource_mut::<GrainSnapshot>());
+    let list = std::mem::take(&mut *world.resource_mut::<NeighbourList>());
+    let range = world.resource::<CellGrid>().interaction_range;
+    update_contacts_inner(world, &mut index, &table, &snapshot, &list, range);
+    *world.resource_mut::<ContactIndex>() = index;
+    *world.resource_mut::<ContactLawTable>() = table;
+    *world.resource_mut::<GrainSnapshot>() = snapshot;
+    *world.resource_mut::<NeighbourList>() = list;
 }
 
 fn update_contacts_inner(

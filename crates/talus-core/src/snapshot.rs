@@ -906,7 +906,7 @@ impl GrainSnapshot {
         let (periodic_box, image) = (self.periodic, self.image);
         // Both scratch lists are kept between steps for their allocations.
         let mut block_moves = std::mem::take(&mut self.block_scratch);
-        let chunk_results = std::mem::take(&mut self.chunk_scratch);
+        let mut chunk_results = std::mem::take(&mut self.chunk_scratch);
         block_moves.clear();
         if track_moves {
             block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
@@ -959,16 +959,18 @@ impl GrainSnapshot {
             pieces.extend(left);
             pieces.sort_by_key(|(range, _)| range.start);
         }
-        // Each piece's records cut into chunks: (the kicked table's number and its
-        // chunk's forces and masses, the piece's start, the chunk's first grain in it,
-        // the chunk's records). A kicked table shorter than `parallel_from` is one chunk.
+        // Each piece's records cut into chunks: (a kicked chunk's forces and masses, the
+        // piece's start, the chunk's first grain in it, the chunk's records), and each
+        // chunk's kicked table by number. A kicked table shorter than `parallel_from` is
+        // one chunk.
         type Job<'r, 'f> = (
-            Option<(usize, &'f [Force], &'f [Mass])>,
+            Option<(&'f [Force], &'f [Mass])>,
             usize,
             usize,
             &'r mut [GrainRecord],
         );
         let mut jobs: Vec<Job> = Vec::new();
+        let mut job_tables: Vec<Option<usize>> = Vec::new();
         let mut rest = &mut self.records[..];
         let mut at = 0;
         for (range, kicked) in pieces {
@@ -981,31 +983,34 @@ impl GrainSnapshot {
             };
             for (c, records) in records.chunks_mut(size).enumerate() {
                 let (from, to) = (c * size, c * size + records.len());
-                let kicked = kicked.map(|(k, f, m)| (k, &f[from..to], &m[from..to]));
-                jobs.push((kicked, range.start, from, records));
+                let chunk_kicked = kicked.map(|(_, f, m)| (&f[from..to], &m[from..to]));
+                jobs.push((chunk_kicked, range.start, from, records));
+                job_tables.push(kicked.map(|(k, _, _)| k));
             }
         }
         let one_chunk = |(kicked, table_start, from, records): Job| {
-            let work = kicked.map(|(k, f, m)| (k, update(records, f, m)));
+            let work = kicked.map_or(0.0, |(f, m)| update(records, f, m));
             (work, wrap_and_measure(table_start, from, records))
         };
-        type JobResult = (Option<(usize, f64)>, SmallVec<[(usize, Moves); 20]>);
-        let mut results: Vec<JobResult> = Vec::with_capacity(jobs.len());
+        // The chunks' results go to the kept scratch list (some 1.3 KB a chunk).
+        chunk_results.clear();
         if n >= parallel_from {
-            results.par_extend(jobs.into_par_iter().map(one_chunk));
+            chunk_results.par_extend(jobs.into_par_iter().map(one_chunk));
         } else {
-            results.extend(jobs.into_iter().map(one_chunk));
+            chunk_results.extend(jobs.into_iter().map(one_chunk));
         }
         // The work of gravity table by table, in the order the tables came, each table's
         // chunks summed in order (a sum of one term is the term: it starts from -0.0).
         let mut work = 0.0;
         for table in 0..kicked_tables {
-            work += results
+            work += chunk_results
                 .iter()
-                .filter_map(|(kicked, _)| kicked.filter(|&(k, _)| k == table).map(|(_, w)| w))
+                .zip(&job_tables)
+                .filter(|&(_, &t)| t == Some(table))
+                .map(|((w, _), _)| w)
                 .sum::<f64>();
         }
-        for (_, blocks) in results {
+        for (_, blocks) in chunk_results.drain(..) {
             for (block, moves) in blocks {
                 block_moves[block] = block_moves[block].merge(moves);
             }
