@@ -67,23 +67,26 @@ fn builds(sim: &Simulation) -> u64 {
         .map_or(0, |list| list.builds)
 }
 
-/// Steps `sim` one block on `pool`, adding the timed steps to `tally`.
+/// Steps `sim` one block on `pool`, adding the timed steps to `tally`. The pool's other
+/// workers poll for work through the whole block, as through `talus run`'s loop of steps.
 fn block(sim: &mut Simulation, pool: &rayon::ThreadPool, tally: &mut Tally) {
     pool.install(|| {
-        sim.step_before_another().expect("the chute steps");
-        let (before, built) = (stage_seconds(sim), builds(sim));
-        let start = Instant::now();
-        for _ in 1..BLOCK_STEPS {
+        talus::core::workers::with_workers_polling(|| {
             sim.step_before_another().expect("the chute steps");
-        }
-        tally.seconds += start.elapsed().as_secs_f64();
-        let after = stage_seconds(sim);
-        tally.stages.resize(after.len(), 0.0);
-        for (total, (a, b)) in tally.stages.iter_mut().zip(after.iter().zip(&before)) {
-            *total += a - b;
-        }
-        tally.steps += BLOCK_STEPS - 1;
-        tally.builds += builds(sim) - built;
+            let (before, built) = (stage_seconds(sim), builds(sim));
+            let start = Instant::now();
+            for _ in 1..BLOCK_STEPS {
+                sim.step_before_another().expect("the chute steps");
+            }
+            tally.seconds += start.elapsed().as_secs_f64();
+            let after = stage_seconds(sim);
+            tally.stages.resize(after.len(), 0.0);
+            for (total, (a, b)) in tally.stages.iter_mut().zip(after.iter().zip(&before)) {
+                *total += a - b;
+            }
+            tally.steps += BLOCK_STEPS - 1;
+            tally.builds += builds(sim) - built;
+        })
     });
 }
 
