@@ -52,22 +52,26 @@ pub fn kick_drift_translation(
         // The last step's state is the snapshot's: kick and drift its records in place
         // (a grain's velocity and position in one line), the components untouched.
         let kicks = Kicks::new(pending, kick);
-        let update = |records: &mut [GrainRecord], f: &[Force], m: &[Mass]| {
-            let drift = |r: &mut GrainRecord, k: usize| {
-                let dx = r.velocity * dt;
-                r.position += dx;
-                m[k].0 * g.dot(dx)
-            };
-            kick_blocks(
-                records,
-                f,
-                m,
-                kicks,
-                |f| f.0,
-                |m| m.0,
-                record_velocity,
-                drift,
-            )
+        // Each record is wrapped into the periodic box right after its drift, as the
+        // snapshot asks (`GrainSnapshot::kick_drift_held`); a copy of the loop for each
+        // case, so that the grain loop carries no test of it.
+        let update = |records: &mut [GrainRecord],
+                      f: &[Force],
+                      m: &[Mass],
+                      wrap: Option<&crate::periodic::WrapRule>| {
+            match wrap {
+                Some(wrap) => kick_records(records, f, m, kicks, |r, k| {
+                    let dx = r.velocity * dt;
+                    r.position += dx;
+                    wrap.apply(&mut r.position);
+                    m[k].0 * g.dot(dx)
+                }),
+                None => kick_records(records, f, m, kicks, |r, k| {
+                    let dx = r.velocity * dt;
+                    r.position += dx;
+                    m[k].0 * g.dot(dx)
+                }),
+            }
         };
         let gravity_work = snapshot.kick_drift_held(
             moving.contiguous_iter().expect("grain query is dense"),
@@ -147,6 +151,28 @@ impl Kicks {
 #[inline(always)]
 fn record_velocity(r: &mut GrainRecord) -> &mut DVec3 {
     &mut r.velocity
+}
+
+/// [`kick_blocks`] over snapshot records, `then` drifting each (a function of its own so
+/// that each drift closure gets its own inlined copy of the loop).
+#[inline(always)]
+fn kick_records(
+    records: &mut [GrainRecord],
+    forces: &[Force],
+    masses: &[Mass],
+    kicks: Kicks,
+    then: impl FnMut(&mut GrainRecord, usize) -> f64,
+) -> f64 {
+    kick_blocks(
+        records,
+        forces,
+        masses,
+        kicks,
+        |f| f.0,
+        |m| m.0,
+        record_velocity,
+        then,
+    )
 }
 
 /// A grain's velocity, for [`kick_blocks`].

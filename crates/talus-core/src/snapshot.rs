@@ -15,6 +15,7 @@ use smallvec::SmallVec;
 
 use crate::components::*;
 use crate::lanes::{F4, V4};
+use crate::periodic::WrapRule;
 
 /// Marker for "no dense index".
 pub const NO_INDEX: u32 = u32::MAX;
@@ -869,34 +870,35 @@ impl GrainSnapshot {
     /// grains summed in order from `parallel_from` grains up, one sum below: the sums
     /// the kick of the grains' components takes.
     ///
-    /// Each chunk, once drifted, is also wrapped into an unsheared periodic box
-    /// (`periodic`, this pass's box) and its moves since the reference are taken, which
-    /// is all the broad phase does to held records ([`Self::refresh_held_motion`]): done
-    /// here, while the chunk is in cache, it saves a pass over every record (one more read
-    /// and write of 64 bytes a grain). The grains the kick leaves alone (the frozen ones)
-    /// are wrapped and measured on their own. The broad phase then takes the moves as
-    /// they are.
+    /// Each record is also wrapped into an unsheared periodic box (`periodic`, this
+    /// pass's box) by `update` itself, with the rule it is given, right after its drift
+    /// (while the record is in a register, not in a second loop over the chunk), and each
+    /// chunk's moves since the reference are then taken: all the broad phase does to held
+    /// records ([`Self::refresh_held_motion`]), done here while the chunk is in cache, which
+    /// saves a pass over every record (one more read and write of 64 bytes a grain). The
+    /// grains the kick leaves alone (the frozen ones) are wrapped and measured in chunks of
+    /// their own. The broad phase then takes the moves as they are.
     pub(crate) fn kick_drift_held<'a>(
         &mut self,
         moving: impl Iterator<Item = HeldTable<'a>>,
         chunking: (usize, usize),
         periodic: Option<crate::periodic::PeriodicBox>,
-        update: impl Fn(&mut [GrainRecord], &[Force], &[Mass]) -> f64 + Sync,
+        update: impl Fn(&mut [GrainRecord], &[Force], &[Mass], Option<&WrapRule>) -> f64 + Sync,
     ) -> f64 {
         let work = self.update_wrap_and_measure(moving, chunking, periodic, update);
         self.moves_taken = true;
         work
     }
 
-    /// [`Self::kick_drift_held`]'s pass: `update` on the tables of `moving`, each chunk
-    /// then wrapped and measured, and the other grains wrapped and measured in chunks of
+    /// [`Self::kick_drift_held`]'s pass: `update` (which wraps) on the tables of `moving`,
+    /// each chunk then measured, and the other grains wrapped and measured in chunks of
     /// their own; the moves stored.
     fn update_wrap_and_measure<'a>(
         &mut self,
         moving: impl Iterator<Item = HeldTable<'a>>,
         (chunk, parallel_from): (usize, usize),
         periodic: Option<crate::periodic::PeriodicBox>,
-        update: impl Fn(&mut [GrainRecord], &[Force], &[Mass]) -> f64 + Sync,
+        update: impl Fn(&mut [GrainRecord], &[Force], &[Mass], Option<&WrapRule>) -> f64 + Sync,
     ) -> f64 {
         self.set_periodic(periodic);
         let n = self.records.len();
@@ -911,15 +913,10 @@ impl GrainSnapshot {
         if track_moves {
             block_moves.resize(n.div_ceil(MOVE_BLOCK), Moves::still());
         }
-        // Wraps a piece of a table (its grains `from..` of the table at `table_start`)
-        // and takes the moves of the blocks it holds a part of.
+        // Takes the moves of the blocks a piece of a table holds a part of (its grains
+        // `from..` of the table at `table_start`).
         let reference = &self.move_reference[..];
-        let wrap_and_measure = |table_start: usize, from: usize, records: &mut [GrainRecord]| {
-            if let Some(wrap) = &wrap {
-                for record in records.iter_mut() {
-                    wrap.apply(&mut record.position);
-                }
-            }
+        let measure = |table_start: usize, from: usize, records: &[GrainRecord]| {
             if track_moves {
                 let moved = MovedChunk {
                     table_start,
@@ -989,8 +986,18 @@ impl GrainSnapshot {
             }
         }
         let one_chunk = |(kicked, table_start, from, records): Job| {
-            let work = kicked.map_or(0.0, |(f, m)| update(records, f, m));
-            (work, wrap_and_measure(table_start, from, records))
+            let work = match kicked {
+                Some((f, m)) => update(records, f, m, wrap.as_ref()),
+                None => {
+                    if let Some(wrap) = &wrap {
+                        for record in records.iter_mut() {
+                            wrap.apply(&mut record.position);
+                        }
+                    }
+                    0.0
+                }
+            };
+            (work, measure(table_start, from, records))
         };
         // The chunks' results go to the kept scratch list (some 1.3 KB a chunk).
         chunk_results.clear();
@@ -1025,7 +1032,7 @@ impl GrainSnapshot {
     /// moves since the reference are left, taken as [`gather_snapshot`]'s copy takes them:
     /// for a pass whose kick did not take them (one with a zero time step).
     fn refresh_held_motion(&mut self) {
-        let no_kick = |_: &mut [GrainRecord], _: &[Force], _: &[Mass]| 0.0;
+        let no_kick = |_: &mut [GrainRecord], _: &[Force], _: &[Mass], _: Option<&WrapRule>| 0.0;
         let chunking = (COPY_CHUNK, usize::MAX);
         self.update_wrap_and_measure(std::iter::empty(), chunking, self.periodic, no_kick);
     }
@@ -1181,12 +1188,16 @@ mod tests {
         for record in &mut held.records[..300] {
             record.position += frozen_move;
         }
-        let drift = |records: &mut [GrainRecord], _: &[Force], _: &[Mass]| {
-            for r in records.iter_mut() {
-                r.position += r.velocity * dt;
-            }
-            0.0
-        };
+        let drift =
+            |records: &mut [GrainRecord], _: &[Force], _: &[Mass], wrap: Option<&WrapRule>| {
+                for r in records.iter_mut() {
+                    r.position += r.velocity * dt;
+                    if let Some(wrap) = wrap {
+                        wrap.apply(&mut r.position);
+                    }
+                }
+                0.0
+            };
         let mut moving =
             world.query_filtered::<(Entity, &Force, &Mass), (With<Grain>, Without<Frozen>)>();
         let moving = moving.query(&world);
