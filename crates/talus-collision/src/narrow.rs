@@ -680,7 +680,27 @@ fn update_contacts_inner(
             fit_vacant_rows(world, index, table, s, &regions);
         }
         sort_contacts(world, index, s);
+        bring_short_lists_inline(&mut index.per_grain);
     }
+}
+
+/// Moves back inline every grain's contact list that spilled to the heap and holds no
+/// more than fits inline again. A list spills when its grain keys a third contact, and
+/// `retain` never gives the heap block back: without this, the lists on the heap only
+/// ever grew in number (512,000-grain chute: 11,000 grains with three or more contacts
+/// at any step, but 36,000 lists on the heap after 100 steps and 69,000 after 400, 64
+/// bytes each plus the allocator's header). Done at the sorts, every
+/// [`CONTACT_SORT_INTERVAL`] steps, so that a grain whose count goes back and forth
+/// between two and three does not free and allocate at every step. Moves entries, in
+/// their order: changes no result.
+fn bring_short_lists_inline(per_grain: &mut [GrainContacts]) {
+    per_grain.par_chunks_mut(REPOINT_GRAINS).for_each(|lists| {
+        for list in lists {
+            if list.spilled() && list.len() <= list.inline_size() {
+                list.shrink_to_fit();
+            }
+        }
+    });
 }
 
 /// An ended contact or a vacant row in the narrow phase's handout: its archetype, the
@@ -1374,4 +1394,41 @@ fn narrow_chunk(
             .filter_map(|&(i, partner, slot)| new_pair(s, table, i as usize, partner, slot)),
     );
     bare.clear();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Lists that spilled to the heap and shrank back to what fits inline are moved back
+    /// inline with their entries in order; longer lists, and lists never spilled, are left
+    /// as they are.
+    #[test]
+    fn short_lists_come_back_inline_with_their_entries_in_order() {
+        let entry = |partner| IndexEntry::new(partner, Entity::PLACEHOLDER, partner + 100);
+        let spilled_then_shrunk = |keep: u32| {
+            let mut list: GrainContacts = (0..5).map(entry).collect();
+            list.retain(|e| e.partner < keep);
+            list
+        };
+        let mut lists: Vec<GrainContacts> = vec![
+            spilled_then_shrunk(0),
+            spilled_then_shrunk(2),
+            spilled_then_shrunk(3),
+            (0..1).map(entry).collect(),
+        ];
+        assert!(lists[..3].iter().all(|l| l.spilled()));
+        let before: Vec<Vec<(u32, u32)>> = lists
+            .iter()
+            .map(|l| l.iter().map(|e| (e.partner, e.slot)).collect())
+            .collect();
+        bring_short_lists_inline(&mut lists);
+        let spilled: Vec<bool> = lists.iter().map(|l| l.spilled()).collect();
+        assert_eq!(spilled, [false, false, true, false]);
+        let after: Vec<Vec<(u32, u32)>> = lists
+            .iter()
+            .map(|l| l.iter().map(|e| (e.partner, e.slot)).collect())
+            .collect();
+        assert_eq!(before, after);
+    }
 }

@@ -95,6 +95,9 @@ impl CandidateChunk {
         self.local.clear();
         self.partner.clear();
         self.gap.clear();
+        reserve_with_headroom(&mut self.local, keys.len());
+        reserve_with_headroom(&mut self.partner, keys.len());
+        reserve_with_headroom(&mut self.gap, keys.len());
         self.local.extend(keys.iter().map(|&k| (k >> 32) as u8));
         self.partner.extend(keys.iter().map(|&k| k as u32));
         self.gap.extend(keys.iter().map(|&k| (k >> 40) as u16));
@@ -103,6 +106,18 @@ impl CandidateChunk {
             .extend(self.partner.iter().map(|&j| j / CHUNK as u32));
         self.partner_blocks.sort_unstable();
         self.partner_blocks.dedup();
+    }
+}
+
+/// Makes room for `needed` items in an empty `list`, with an eighth more when it must
+/// grow, instead of `Vec`'s growth, which at least doubles it: each chunk's lists are
+/// kept from build to build, and as a long run's chunks outgrow their first builds one
+/// after another, doubling left them holding up to twice what they need (512,000-grain
+/// chute: the heap's blocks of 1 to 8 KB, where these lists are, grew from 24.3 to 28.6 MB
+/// in 100 steps; with the eighth, 25.9 to 27.3 MB).
+fn reserve_with_headroom<T>(list: &mut Vec<T>, needed: usize) {
+    if list.capacity() < needed {
+        list.reserve_exact(needed + needed / 8);
     }
 }
 
