@@ -176,6 +176,15 @@ impl ContactIndex {
         self.len() == 0
     }
 
+    /// How many grains' contact lists are on the heap, and how many of those hold more
+    /// contacts than fit inline: after a contact-table sort the two are equal (a list
+    /// that shrank back returns inline there). For memory checks.
+    pub fn lists_on_heap(&self) -> (usize, usize) {
+        let on_heap = self.per_grain.iter().filter(|l| l.spilled());
+        let longer = on_heap.clone().filter(|l| l.len() > l.inline_size());
+        (on_heap.count(), longer.count())
+    }
+
     /// The contact entity of a pair, if they are in contact (in either order), with the
     /// bodies' dense indices taken from `s`, the snapshot the index was last keyed by
     /// (`None` if it was keyed by another layout). For inspection, not for hot loops.
