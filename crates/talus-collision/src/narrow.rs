@@ -141,6 +141,11 @@ pub struct ContactIndex {
     /// Whether `vacant` lists the tables' vacant rows as they are; when not, the next pass
     /// finds them again.
     vacant_known: bool,
+    /// Grains (dense indices in `layout`) whose contact list, on the heap, lost a contact
+    /// and then held no more than fit inline: brought back inline at the next sort
+    /// ([`bring_short_lists_inline`]). A grain may be listed twice, or hold more again by
+    /// then.
+    shrunk: Vec<u32>,
 }
 
 /// A vacant row of a contact table: its archetype, the region of its grain, its row and
@@ -246,6 +251,8 @@ impl ContactIndex {
                 }
             }
             self.per_grain = rekeyed;
+            // Fresh lists hold what they need; the listed grains were of the old order.
+            self.shrunk.clear();
             self.layout = s.layout;
             self.live_build = None;
             // The vacant rows' regions follow their grains' new places.
@@ -329,6 +336,7 @@ fn update_contacts_inner(
         bare_pairs,
         live,
         live_build,
+        shrunk,
         ..
     } = index;
     if new_pairs.len() < chunks {
@@ -411,10 +419,11 @@ fn update_contacts_inner(
     // Each with its key grain, whose region the contact's row stands in; those the
     // threads ended with their rows found.
     let mut ended: Vec<(Entity, u32)> = Vec::new();
-    let mut ended_rows: Vec<Vec<EndedRow>> = Vec::new();
+    let mut ended_rows: Vec<(Vec<EndedRow>, Vec<u32>)> = Vec::new();
     let view: &World = world;
     if check_all {
         for (key, entries) in per_grain.iter_mut().enumerate() {
+            let spilled = entries.spilled();
             entries.retain(|e| {
                 let keep = touching(s, range, key, e.partner) || {
                     view.get::<ContactGeometry>(e.contact())
@@ -427,6 +436,9 @@ fn update_contacts_inner(
                 }
                 keep
             });
+            if spilled && entries.len() <= entries.inline_size() {
+                shrunk.push(key as u32);
+            }
         }
     } else {
         // Each thread ends the contacts keyed in its share of whole chunks of grains, whose
@@ -446,6 +458,9 @@ fn update_contacts_inner(
                 end_idle_contacts(s, range, pairs, first, lists, live, view, &ended_region)
             })
             .collect_into_vec(&mut ended_rows);
+    }
+    for (_, keys) in &ended_rows {
+        shrunk.extend_from_slice(keys);
     }
     // The list is read; its allocation goes back for the next force pass to fill.
     let mut pairs = idle.pairs;
@@ -479,7 +494,7 @@ fn update_contacts_inner(
         .map(|(c, key)| (c, ended_region(key), key));
     let mut ended_at: Vec<EndedRow> = ended
         .map(|(c, region, key)| ended_row(world, c, region, key))
-        .chain(ended_rows.into_iter().flatten())
+        .chain(ended_rows.into_iter().flat_map(|(rows, _)| rows))
         .collect();
     ended_at.sort_unstable_by_key(|&(archetype, region, row, _, _)| (archetype, region, row));
     // The vacant rows join them, in the same order: two sorted runs, which a stable sort
@@ -689,27 +704,30 @@ fn update_contacts_inner(
             fit_vacant_rows(world, index, table, s, &regions);
         }
         sort_contacts(world, index, s);
-        bring_short_lists_inline(&mut index.per_grain);
+        bring_short_lists_inline(&mut index.per_grain, &mut index.shrunk);
     }
 }
 
-/// Moves back inline every grain's contact list that spilled to the heap and holds no
-/// more than fits inline again. A list spills when its grain keys a third contact, and
-/// `retain` never gives the heap block back: without this, the lists on the heap only
-/// ever grew in number (512,000-grain chute: 11,000 grains with three or more contacts
-/// at any step, but 36,000 lists on the heap after 100 steps and 69,000 after 400, 64
-/// bytes each plus the allocator's header). Done at the sorts, every
-/// [`CONTACT_SORT_INTERVAL`] steps, so that a grain whose count goes back and forth
-/// between two and three does not free and allocate at every step. Moves entries, in
-/// their order: changes no result.
-fn bring_short_lists_inline(per_grain: &mut [GrainContacts]) {
-    per_grain.par_chunks_mut(REPOINT_GRAINS).for_each(|lists| {
-        for list in lists {
-            if list.spilled() && list.len() <= list.inline_size() {
-                list.shrink_to_fit();
-            }
+/// Moves back inline the contact lists of the grains `shrunk` lists that are on the heap
+/// and hold no more than fits inline, and empties `shrunk`. A list spills to the heap when
+/// its grain keys a third contact, and removing entries never gives the heap block back:
+/// without this, the lists on the heap only ever grew in number (512,000-grain chute:
+/// 11,000 grains with three or more contacts at any step, but 36,000 lists on the heap
+/// after 100 steps and 69,000 after 400, 64 bytes each plus the allocator's header). Done
+/// at the sorts, every [`CONTACT_SORT_INTERVAL`] steps, so that a grain whose count goes
+/// back and forth between two and three does not free and allocate at every step; for the
+/// grains whose lists shrank since the last sort only (a pass over every list cost 0.17 %
+/// of the 512,000-grain step). Moves entries, in their order: changes no result.
+fn bring_short_lists_inline(per_grain: &mut [GrainContacts], shrunk: &mut Vec<u32>) {
+    for &key in shrunk.iter() {
+        if let Some(list) = per_grain.get_mut(key as usize)
+            && list.spilled()
+            && list.len() <= list.inline_size()
+        {
+            list.shrink_to_fit();
         }
-    });
+    }
+    shrunk.clear();
 }
 
 /// An ended contact or a vacant row in the narrow phase's handout: its archetype, the
@@ -1136,7 +1154,8 @@ fn set_live(live: &mut [Vec<u64>], key: usize, slot: u32, on: bool) {
 /// evaluation) whose grains no longer touch, for the key grains `first..` of `lists` (their
 /// contact lists, `first` a multiple of [`CHUNK`]) and `live` (their chunks' live bits);
 /// the other pairs are another call's. Returns each ended contact's row, as the handout
-/// lists it.
+/// lists it, and the key grains whose lists, on the heap, came to fit inline
+/// ([`ContactIndex::shrunk`]).
 #[allow(clippy::too_many_arguments)]
 fn end_idle_contacts(
     s: &GrainSnapshot,
@@ -1147,7 +1166,7 @@ fn end_idle_contacts(
     live: &mut [Vec<u64>],
     world: &World,
     region_of: &impl Fn(u32) -> u32,
-) -> Vec<EndedRow> {
+) -> (Vec<EndedRow>, Vec<u32>) {
     let len = lists.len();
     let keyed_here = move |&[a, b]: &[u32; 2]| {
         let (key, partner) = first_in_order(a, b);
@@ -1156,6 +1175,7 @@ fn end_idle_contacts(
     };
     let mut ended = Vec::new();
     let mut ended_contacts: Vec<(Entity, u32)> = Vec::new();
+    let mut shrunk = Vec::new();
     // The pairs' grains and contact lists are all over the packing: each pair asks for
     // those of the pair a few ahead.
     let mut ahead = pairs.iter().filter_map(keyed_here).skip(LISTS_AHEAD);
@@ -1173,6 +1193,9 @@ fn end_idle_contacts(
             let entry = entries.remove(k);
             set_live(live, local, entry.slot, false);
             ended_contacts.push((entry.contact(), key));
+            if entries.spilled() && entries.len() <= entries.inline_size() {
+                shrunk.push(key);
+            }
         }
     }
     // The ended contacts' rows, in a loop of their own: each lookup waits on the entity's
@@ -1183,7 +1206,7 @@ fn end_idle_contacts(
             .iter()
             .map(|&(contact, key)| ended_row(world, contact, region_of(key), key)),
     );
-    ended
+    (ended, shrunk)
 }
 
 /// What every chunk of the narrow phase's parallel pass reads.
@@ -1409,9 +1432,9 @@ fn narrow_chunk(
 mod tests {
     use super::*;
 
-    /// Lists that spilled to the heap and shrank back to what fits inline are moved back
-    /// inline with their entries in order; longer lists, and lists never spilled, are left
-    /// as they are.
+    /// The listed grains' lists that spilled to the heap and shrank back to what fits
+    /// inline are moved back inline with their entries in order; longer lists, lists never
+    /// spilled and grains not listed are left as they are, and the list is emptied.
     #[test]
     fn short_lists_come_back_inline_with_their_entries_in_order() {
         let entry = |partner| IndexEntry::new(partner, Entity::PLACEHOLDER, partner + 100);
@@ -1425,15 +1448,23 @@ mod tests {
             spilled_then_shrunk(2),
             spilled_then_shrunk(3),
             (0..1).map(entry).collect(),
+            spilled_then_shrunk(1),
         ];
-        assert!(lists[..3].iter().all(|l| l.spilled()));
+        assert!(
+            lists
+                .iter()
+                .enumerate()
+                .all(|(k, l)| l.spilled() == (k != 3))
+        );
         let before: Vec<Vec<(u32, u32)>> = lists
             .iter()
             .map(|l| l.iter().map(|e| (e.partner, e.slot)).collect())
             .collect();
-        bring_short_lists_inline(&mut lists);
+        let mut shrunk = vec![0, 1, 2, 3, 1, 17];
+        bring_short_lists_inline(&mut lists, &mut shrunk);
+        assert!(shrunk.is_empty());
         let spilled: Vec<bool> = lists.iter().map(|l| l.spilled()).collect();
-        assert_eq!(spilled, [false, false, true, false]);
+        assert_eq!(spilled, [false, false, true, false, true]);
         let after: Vec<Vec<(u32, u32)>> = lists
             .iter()
             .map(|l| l.iter().map(|e| (e.partner, e.slot)).collect())
