@@ -708,8 +708,8 @@ fn update_contacts_inner(
     }
 }
 
-/// Moves back inline the contact lists of the grains `shrunk` lists that are on the heap
-/// and hold no more than fits inline, and empties `shrunk`. A list spills to the heap when
+/// Moves back inline each contact list of the grains in `shrunk` that is on the heap and
+/// holds no more than fits inline, then empties `shrunk`. A list spills to the heap when
 /// its grain keys a third contact, and removing entries never gives the heap block back:
 /// without this, the lists on the heap only ever grew in number (512,000-grain chute:
 /// 11,000 grains with three or more contacts at any step, but 36,000 lists on the heap
