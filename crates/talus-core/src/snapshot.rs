@@ -966,8 +966,11 @@ impl GrainSnapshot {
             usize,
             &'r mut [GrainRecord],
         );
-        let mut jobs: Vec<Job> = Vec::new();
-        let mut job_tables: Vec<Option<usize>> = Vec::new();
+        // Each piece is cut into at most one chunk more than its grains fill whole: sized
+        // up front, so that the lists are not grown (and copied) step after step.
+        let most_jobs = n.div_ceil(chunk.max(1)) + pieces.len();
+        let mut jobs: Vec<Job> = Vec::with_capacity(most_jobs);
+        let mut job_tables: Vec<Option<usize>> = Vec::with_capacity(most_jobs);
         let mut rest = &mut self.records[..];
         let mut at = 0;
         for (range, kicked) in pieces {
