@@ -101,11 +101,23 @@ impl CandidateChunk {
         self.local.extend(keys.iter().map(|&k| (k >> 32) as u8));
         self.partner.extend(keys.iter().map(|&k| k as u32));
         self.gap.extend(keys.iter().map(|&k| (k >> 40) as u16));
+        // The blocks are entered one at a time in their sorted place, not gathered one per
+        // pair and then sorted and deduplicated: a list one entry per pair (some 1,000 a
+        // chunk) outgrew the inline room and kept its heap block from build to build, 8 MB
+        // at 512,000 grains for a list that holds a few dozen blocks. Partners come in runs
+        // of the same block, so most pairs only compare with the last block entered.
         self.partner_blocks.clear();
-        self.partner_blocks
-            .extend(self.partner.iter().map(|&j| j / CHUNK as u32));
-        self.partner_blocks.sort_unstable();
-        self.partner_blocks.dedup();
+        let mut last = u32::MAX;
+        for &j in &self.partner {
+            let block = j / CHUNK as u32;
+            if block == last {
+                continue;
+            }
+            last = block;
+            if let Err(at) = self.partner_blocks.binary_search(&block) {
+                self.partner_blocks.insert(at, block);
+            }
+        }
     }
 }
 
@@ -449,5 +461,46 @@ fn sheared_candidates(
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Pair keys of chunk 0 whose partners come in runs of the same block, the runs in no
+    /// order and some blocks met twice: `pairs` pairs over `blocks` blocks.
+    fn keys_over_blocks(pairs: usize, blocks: u32) -> Vec<u64> {
+        (0..pairs)
+            .map(|p| {
+                let block = (p as u32 / 7 * 37 + 11) % blocks + 1;
+                let partner = block * CHUNK as u32 + p as u32 % CHUNK as u32;
+                pair_key((p % 5) as u16, p % CHUNK, partner)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn partner_blocks_are_the_partners_blocks_sorted_once_each() {
+        let mut chunk = CandidateChunk::default();
+        let mut keys = keys_over_blocks(1_000, 40);
+        chunk.fill(&mut keys, &mut Vec::new());
+        let mut expected: Vec<u32> = chunk.partner.iter().map(|&j| j / CHUNK as u32).collect();
+        expected.sort_unstable();
+        expected.dedup();
+        assert_eq!(chunk.partner_blocks.as_slice(), expected.as_slice());
+        assert_eq!(expected.len(), 40);
+    }
+
+    #[test]
+    fn a_chunk_of_many_pairs_over_few_blocks_keeps_its_blocks_inline() {
+        // The list of blocks is a chunk's for as long as the run lasts: gathering one entry
+        // per pair before deduplicating moved it to the heap for good (8 MB at 512,000
+        // grains), though a chunk's partners lie in a few dozen blocks.
+        let mut chunk = CandidateChunk::default();
+        let mut keys = keys_over_blocks(1_000, 12);
+        chunk.fill(&mut keys, &mut Vec::new());
+        assert_eq!(chunk.partner_blocks.len(), 12);
+        assert!(!chunk.partner_blocks.spilled());
     }
 }
