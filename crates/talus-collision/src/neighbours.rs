@@ -104,8 +104,8 @@ impl CandidateChunk {
         // The blocks are entered one at a time in their sorted place, not gathered one per
         // pair and then sorted and deduplicated: a list one entry per pair (some 1,000 a
         // chunk) outgrew the inline room and kept its heap block from build to build, 8 MB
-        // at 512,000 grains for a list that holds a few dozen blocks. Partners come in runs
-        // of the same block, so most pairs only compare with the last block entered.
+        // at 512,000 grains for a list that holds a few dozen blocks. A pair costs a binary
+        // search among those, none when its block is the last one entered.
         self.partner_blocks.clear();
         let mut last = u32::MAX;
         for &j in &self.partner {
