@@ -89,6 +89,11 @@ def main() -> None:
     parser.add_argument("--mpiexec", default="mpiexec",
                         help="the MPI launcher of LAMMPS's MPI library (with --threads above 1)")
     args = parser.parse_args()
+    for name, program in [("LAMMPS", args.lmp), ("talus", args.talus)] + (
+        [("mpiexec", args.mpiexec)] if args.threads > 1 else []
+    ):
+        if shutil.which(program) is None:
+            sys.exit(f"race.py: no {name} executable at `{program}`")
     lmp = [args.lmp] if args.threads == 1 else [args.mpiexec, "-n", str(args.threads), args.lmp]
     rates: dict[tuple[int, int], tuple[list[float], list[float]]] = {
         size: ([], []) for size in SIZES
