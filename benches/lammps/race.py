@@ -3,8 +3,8 @@
 
 Each round runs, for every size, LAMMPS's `in.chute` (this folder) and the matching Talus
 scene (`scenes/bench/chute.ron` with the same replication and number of steps), one after
-the other, each on the same number of cores (`--threads`; LAMMPS then runs as that many MPI ranks
-through `--mpiexec`): a slow stretch of the machine then slows both alike. Prints
+the other, each on the same number of cores (`--threads`; LAMMPS then runs as that many
+MPI ranks through `--mpiexec`): a slow stretch of the machine then slows both alike. Prints
 each run's grain-steps per second and, per size, the medians and their ratio.
 
 LAMMPS's rate is grains x steps / its "Loop time" (the run's loop, setup excluded); Talus's
@@ -38,15 +38,18 @@ SIZES = [(1, 100), (1, 1000), (2, 100), (4, 100)]
 def talus_scene(folder: Path, copies: int, steps: int) -> Path:
     """The chute scene replicated `copies` x `copies` in x-y, run for `steps` steps."""
     text = (ROOT / "scenes/bench/chute.ron").read_text()
-    text = re.sub(r"steps: \d+,", f"steps: {steps},", text, count=1)
-    text = text.replace(
-        "periodic: (x: (0.0, 40.0), y: (0.0, 20.0))",
-        f"periodic: (x: (0.0, {40.0 * copies}), y: (0.0, {20.0 * copies}))",
-    )
-    text = text.replace(
-        'LammpsData(file: "data.chute",',
-        f'LammpsData(file: "data.chute", replicate: ({copies}, {copies}, 1),',
-    )
+    # Each substitution must find its text: a changed scene would otherwise race the wrong
+    # packing without a word.
+    for pattern, replacement in [
+        (r"steps: \d+,", f"steps: {steps},"),
+        (r"periodic: \(x: \(0\.0, 40\.0\), y: \(0\.0, 20\.0\)\)",
+         f"periodic: (x: (0.0, {40.0 * copies}), y: (0.0, {20.0 * copies}))"),
+        (r'LammpsData\(file: "data\.chute",',
+         f'LammpsData(file: "data.chute", replicate: ({copies}, {copies}, 1),'),
+    ]:
+        text, found = re.subn(pattern, replacement, text, count=1)
+        if found != 1:
+            sys.exit(f"race.py: scenes/bench/chute.ron has no `{pattern}` to replace")
     path = folder / f"chute-{copies}x{copies}-{steps}.ron"
     path.write_text(text)
     return path
