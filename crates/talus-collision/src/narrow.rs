@@ -353,6 +353,7 @@ fn update_contacts_inner(
             .par_chunks_mut(CHUNK)
             .zip(list.chunks[..chunks].par_iter())
             .zip(live[..chunks].par_iter_mut())
+            .with_max_len(2)
             .for_each(|((entries, candidates), bits)| mark_live(entries, candidates, bits));
         *live_build = Some(list.builds);
     }

@@ -274,9 +274,13 @@ pub fn update_neighbour_list(
         list.chunks.resize_with(chunks, CandidateChunk::default);
     }
     list.chunks.truncate(chunks);
+    // One chunk a job (some 100 µs each at 32,000 grains): with rayon's adaptive split,
+    // a thread runs a run of chunks it took without letting go of any, and the other
+    // thread could wait through several of them at the end.
     list.chunks
         .par_iter_mut()
         .enumerate()
+        .with_max_len(1)
         .for_each(|(chunk, out)| {
             let (mut keys, mut scratch): (Vec<u64>, Vec<u64>) = (Vec::new(), Vec::new());
             let mut pairs: Vec<(u32, u16)> = Vec::new();

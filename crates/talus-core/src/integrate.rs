@@ -325,6 +325,9 @@ fn kick_spins<W: Send>(
                 t.par_chunks(PARALLEL_THRESHOLD)
                     .zip(i.par_chunks(PARALLEL_THRESHOLD)),
             )
+            // One chunk a job, so that no thread is left to kick a run of them alone at
+            // the end of the loop (as in `GrainSnapshot::kick_drift_held`).
+            .with_max_len(1)
             .map(kick_chunk)
             .reduce(|| true, |a, b| a & b)
     } else {
