@@ -353,6 +353,8 @@ fn update_contacts_inner(
             .par_chunks_mut(CHUNK)
             .zip(list.chunks[..chunks].par_iter())
             .zip(live[..chunks].par_iter_mut())
+            // Small jobs, so that no thread is left with a run of chunks alone at the end
+            // (as the list's build, `update_neighbour_list`).
             .with_max_len(2)
             .for_each(|((entries, candidates), bits)| mark_live(entries, candidates, bits));
         *live_build = Some(list.builds);
