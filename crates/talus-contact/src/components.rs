@@ -270,18 +270,6 @@ impl ChunkGrainMasks {
         (u64::MAX >> (63 - high)) & (u64::MAX << low)
     }
 
-    /// The bits of the blocks of grains that lie wholly inside the range of `len` grains
-    /// from `first`, for a snapshot's mask shift `shift`; never bit 63, which the last
-    /// grains share with the walls' codes.
-    pub fn inside_range(first: usize, len: usize, shift: u32) -> u64 {
-        let from = first.div_ceil(1 << shift);
-        let end = ((first + len) >> shift).min(63);
-        if end <= from {
-            return 0;
-        }
-        (u64::MAX >> (64 - end)) & (u64::MAX << from)
-    }
-
     /// Records the chunks' masks of the table whose bodies column is `bodies`, replacing
     /// any earlier record of it.
     pub fn record(&mut self, bodies: &[ContactBodies], masks: impl IntoIterator<Item = u64>) {
@@ -329,27 +317,3 @@ pub struct IdleContacts {
 /// The law's per-contact history, e.g. a tangential spring.
 #[derive(Component, Clone, Debug, Default)]
 pub struct LawState<H: Send + Sync + 'static>(pub H);
-
-#[cfg(test)]
-mod tests {
-    use super::ChunkGrainMasks;
-
-    /// A block's bit is set exactly when all of its grains lie in the range, bit 63 never.
-    #[test]
-    fn inside_range_holds_the_blocks_wholly_in_the_range() {
-        for shift in [0, 3, 9] {
-            let block = 1usize << shift;
-            for (first, len) in [(0, 0), (0, 1), (5, 40), (16_000, 15_088), (0, 70 * block)] {
-                let mask = ChunkGrainMasks::inside_range(first, len, shift);
-                for k in 0..64 {
-                    let inside = k < 63 && k * block >= first && (k + 1) * block <= first + len;
-                    assert_eq!(
-                        mask >> k & 1 == 1,
-                        inside,
-                        "shift {shift}, {first}+{len}, bit {k}"
-                    );
-                }
-            }
-        }
-    }
-}

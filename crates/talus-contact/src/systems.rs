@@ -1110,31 +1110,29 @@ fn sum_frozen_totals(
 /// [`RegionRuns::touching_runs_descending`]) only those rows are scanned, in that order,
 /// and always by picking.
 ///
-/// With `skip` (the pass's [`ChunkGrainMasks`] and the snapshot's mask shift), picking
-/// passes over the chunks of rows whose masks share no bit with the range's: none of
-/// their sides is in the range, so the same sides are added in the same order. The
-/// contact tables are in the order of their rows' first bodies (between sorts, each
-/// region's new contacts in its own rows), so on two threads each range skips most of
-/// the other's rows.
+/// With `skip` (the pass's [`ChunkGrainMasks`] and the snapshot's mask shift), a table
+/// whose masks the force loop left is scanned only over the chunks of rows whose masks
+/// share a bit with the range's: none of the other rows' sides is in the range, so the same
+/// sides are added in the same order. The contact tables are in the order of their rows'
+/// first bodies (between sorts, each region's new contacts in its own rows), so on two
+/// threads each range skips most of the other's rows, and in the chunks it reads the sides
+/// in and out of the range come in runs: a branch per side, as on one thread, predicts
+/// them. (Until session 55 the chunks that also touched grains of another range were
+/// picked first, as below; the branches took 10 % less of the stage on 2 threads at
+/// 32,000 grains, `docs/performance-log.md`.)
 ///
-/// With `pick` (two or more threads), every contact's two bodies are first tested against
-/// the range without a branch, each side in range appended to `picked` as
-/// `row << 1 | side` (the write always happens, the length grows by the test's 0 or 1),
-/// and only the picked sides are then summed. Where a thread's range meets rows whose
-/// bodies lie in and out of it in no predictable pattern, a branch per side mispredicted on
-/// so many that this stage took as long on two threads as on one (when the tables were in
-/// no order). A block of [`PICK_BLOCK`] rows whose chunks' masks name only blocks of grains
-/// wholly inside the range ([`ChunkGrainMasks::inside_range`]; most of a range's rows, the
-/// tables being in the order of their first bodies) is summed with a branch per side
-/// instead, as on one thread, where every branch is predicted and picking would only add a
-/// pass (0.2–1.1 ns a grain-step less for the stage on 2 threads at 32,000 and 512,000
-/// grains; `docs/performance-log.md`, session 49). Either way the sums are taken in the
-/// same order.
+/// Without masks and with `pick` (two or more threads; a region's rows), every contact's
+/// two bodies are first tested against the range without a branch, each side in range
+/// appended to `picked` as `row << 1 | side` (the write always happens, the length grows
+/// by the test's 0 or 1), and only the picked sides are then summed: where a range meets
+/// rows whose bodies lie in and out of it in no predictable pattern, a branch per side
+/// mispredicted on so many that this stage took as long on two threads as on one (when
+/// the tables were in no order). Either way the sums are taken in the same order.
 ///
 /// A range of at least [`LATE_START_GRAINS`] grains has its totals set to their weights as
 /// the scan of the contacts reaches them, down to [`START_LEAD`] grains below the smallest
-/// body of each block of [`START_BLOCK`] contacts (of each block of picked contacts with
-/// `pick`), instead of in a pass of their own first: the contact table is in the order of
+/// body of each block of [`START_BLOCK`] contacts (of each block of picked contacts when
+/// picking), instead of in a pass of their own first: the contact table is in the order of
 /// its first bodies and a second body is at most two layers of cells further
 /// (`docs/architecture.md`, "Grain order"), so as the scan runs down a total is set shortly
 /// before the contacts add to it, while its line is still in cache. A pass of its own over
@@ -1261,45 +1259,47 @@ fn sum_range(
         }
     }
     let range_mask = skip.map_or(0, |(_, shift)| ChunkGrainMasks::of_range(first, len, shift));
-    let inside_mask = skip.map_or(0, |(_, shift)| {
-        ChunkGrainMasks::inside_range(first, len, shift)
-    });
     for (bodies, forces, masks) in pieces {
-        let blocks = bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK));
-        for (block, (bodies, forces)) in blocks.enumerate().rev() {
-            // A block whose chunks touch only grains inside the range (the table is in the
-            // order of its first bodies, so most blocks of a range's rows are): every side
-            // but a wall's is in range, a branch per side is predicted, and the block is
-            // summed as one thread sums, without picking. The same sides in the same order.
-            let direct = inside_mask != 0
-                && masks.is_some_and(|m| {
-                    let first_chunk = block * (PICK_BLOCK / ENERGY_CHUNK_LEN);
-                    let chunks = bodies.len().div_ceil(ENERGY_CHUNK_LEN);
-                    m[first_chunk..first_chunk + chunks]
-                        .iter()
-                        .all(|&c| c & !inside_mask == 0)
-                });
-            if direct {
-                add_rows(bodies, forces, force, torque, &mut set_from);
-                continue;
+        if let Some(masks) = masks {
+            // The chunks whose masks meet the range, each run of them from its last row to
+            // its first as the whole scan takes them, a branch per side: the table is in the
+            // order of its first bodies, so the sides in and out of the range come in runs
+            // the branches predict (picking them cost 10 % more of the stage on 2 threads).
+            let mut end = masks.len();
+            while end > 0 {
+                while end > 0 && masks[end - 1] & range_mask == 0 {
+                    end -= 1;
+                }
+                let mut from = end;
+                while from > 0 && masks[from - 1] & range_mask != 0 {
+                    from -= 1;
+                }
+                if from < end {
+                    let rows = from * ENERGY_CHUNK_LEN..(end * ENERGY_CHUNK_LEN).min(bodies.len());
+                    add_rows(
+                        &bodies[rows.clone()],
+                        &forces[rows],
+                        force,
+                        torque,
+                        &mut set_from,
+                    );
+                }
+                end = from;
             }
+            continue;
+        }
+        let blocks = bodies.chunks(PICK_BLOCK).zip(forces.chunks(PICK_BLOCK));
+        for (bodies, forces) in blocks.rev() {
             let mut count = 0;
             // The lowest offset picked (`usize::MAX` for none).
             let mut low = usize::MAX;
-            for (chunk, rows) in bodies.chunks(ENERGY_CHUNK_LEN).enumerate() {
-                let chunk_index = block * (PICK_BLOCK / ENERGY_CHUNK_LEN) + chunk;
-                if masks.is_some_and(|m| m[chunk_index] & range_mask == 0) {
-                    continue;
-                }
-                let base = chunk * ENERGY_CHUNK_LEN;
-                for (row, b) in rows.iter().enumerate() {
-                    let code = ((base + row) as u32) << 1;
-                    picked[count] = code;
-                    count += usize::from(in_range(b.a));
-                    picked[count] = code | 1;
-                    count += usize::from(in_range(b.b));
-                    low = low.min(offset(b.a).min(offset(b.b)));
-                }
+            for (row, b) in bodies.iter().enumerate() {
+                let code = (row as u32) << 1;
+                picked[count] = code;
+                count += usize::from(in_range(b.a));
+                picked[count] = code | 1;
+                count += usize::from(in_range(b.b));
+                low = low.min(offset(b.a).min(offset(b.b)));
             }
             if low < set_from {
                 let from = low.saturating_sub(START_LEAD);
@@ -1348,10 +1348,8 @@ const START_LEAD: usize = 1024;
 /// to.
 const SUM_AHEAD: usize = 16;
 
-/// Contacts whose sides [`sum_range`] picks at a time: whole chunks of the force loop,
-/// whose [`ChunkGrainMasks`] it tests.
+/// Contacts whose sides [`sum_range`] picks at a time.
 const PICK_BLOCK: usize = 2048;
-const _: () = assert!(PICK_BLOCK.is_multiple_of(ENERGY_CHUNK_LEN));
 
 /// The unbalanced-force ratio of the packing (Yade's `unbalancedForce`): the mean size
 /// of the net force on the free grains (contacts and body forces, as summed in the
