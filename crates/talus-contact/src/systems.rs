@@ -1488,7 +1488,7 @@ mod tests {
             );
             same_totals(&force, &torque, &format!("pick: {pick}"));
         }
-        // In ranges of 6,000 grains, as threads pick them, each skipping the chunks of rows
+        // In ranges of 6,000 grains, as threads sum them, each skipping the chunks of rows
         // whose masks miss its range (most of them here): a mask or a range's bits one
         // block short leaves sides out.
         let shift = ChunkGrainMasks::shift(grains);
@@ -1520,7 +1520,7 @@ mod tests {
         same_totals(
             &force,
             &torque,
-            "picked in ranges, chunks skipped by their masks",
+            "summed in ranges, chunks skipped by their masks",
         );
         // Region by region, as the sums by region run: each region's part of the range from
         // the rows that touch the region's grains alone.
