@@ -176,6 +176,7 @@ pub fn evaluate_law<L: ContactLaw>(
     mut idle: ResMut<IdleContacts>,
     mut grain_masks: ResMut<ChunkGrainMasks>,
     mut region_runs: Local<RegionRuns>,
+    mut outcomes: Local<Vec<ChunkOutcome>>,
     mut contacts: Query<(
         &Contact,
         &mut LawState<L::History>,
@@ -284,7 +285,9 @@ pub fn evaluate_law<L: ContactLaw>(
     let idle = &mut *idle;
     idle.layout = snapshot.layout;
     idle.evaluated = true;
-    let mut outcomes: Vec<(ContactEnergySums, Vec<[u32; 2]>, u64)> = Vec::new();
+    // Kept from step to step for its allocation: a 512,000-grain chute's list of some
+    // 5,000 chunks, made afresh, came from new pages of memory at every step.
+    let outcomes = &mut *outcomes;
     let by_region = region_loop.filter(|_| !book);
     let regions = by_region.map(|on| GrainRegions::new(snapshot.len(), on.region_grains));
     // Only the force sums of two or more threads read the chunks' masks (`ChunkGrainMasks`).
@@ -353,6 +356,11 @@ pub fn evaluate_law<L: ContactLaw>(
         }
     }
 }
+
+/// What the force loop returns for one chunk of a law's contacts: their energies, the pairs
+/// of those that carried no force ([`IdleContacts`]) and the grains' mask of the chunk
+/// ([`ChunkGrainMasks`]; 0 where the sums do not read it).
+type ChunkOutcome = (ContactEnergySums, Vec<[u32; 2]>, u64);
 
 /// The force loop over one chunk of a law's contacts, their energies summed (the
 /// dissipation by the law's own channel, not yet by global id). Not
