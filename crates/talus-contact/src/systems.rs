@@ -286,7 +286,7 @@ pub fn evaluate_law<L: ContactLaw>(
     idle.layout = snapshot.layout;
     idle.evaluated = true;
     // Kept from step to step for its allocation: a 512,000-grain chute's list of some
-    // 5,000 chunks, made afresh, came from new pages of memory at every step.
+    // 1,000 chunks, made afresh, came from new pages of memory at every step.
     let outcomes = &mut *outcomes;
     let by_region = region_loop.filter(|_| !book);
     let regions = by_region.map(|on| GrainRegions::new(snapshot.len(), on.region_grains));
