@@ -511,7 +511,7 @@ fn update_contacts_inner(
             .map(|(c, region, key)| ended_row(world, c, region, key))
             .chain(ended_rows.into_iter().flat_map(|(rows, _)| rows)),
     );
-    ended_at.sort_unstable_by_key(|&(archetype, region, row, _, _)| (archetype, region, row));
+    ended_at.sort_unstable_by_key(handout_order);
     // The vacant rows join them, in the same order.
     if keep_vacant {
         join_vacant_rows(&mut ended_at, &mut merged, &index.vacant);
@@ -752,22 +752,28 @@ fn bring_short_lists_inline(per_grain: &mut [GrainContacts], shrunk: &mut Vec<u3
 /// known, [`VACANT_KEY`] for a row already vacant).
 type EndedRow = (ArchetypeId, u32, usize, Entity, u32);
 
+/// The order of the handout's list: by archetype, region, then row (two entries are never of
+/// one row).
+#[inline]
+fn handout_order(&(archetype, region, row, _, _): &EndedRow) -> (ArchetypeId, u32, usize) {
+    (archetype, region, row)
+}
+
 /// A row a law's recycling writes: the contact's entity and table row, the contact it is
 /// to hold and its bodies ([`talus_contact::systems::RecycleContacts`]).
 type Reuse = (Entity, usize, Contact, ContactBodies);
 
-/// Adds the `vacant` rows to the ended contacts' rows `ended` (each list in increasing
-/// order of archetype, region and row), as [`VACANT_KEY`] entries, keeping that order;
+/// Adds the `vacant` rows to the ended contacts' rows `ended` (each list in
+/// [`handout_order`]), as [`VACANT_KEY`] entries, keeping that order;
 /// `spare` is the list it merges them in (its contents are lost). The order is the one a
 /// stable sort of `ended` followed by `vacant` gives (two rows are never the same), found
 /// in one pass; a `vacant` out of order (not made by the narrow phase) is sorted with them.
 fn join_vacant_rows(ended: &mut Vec<EndedRow>, spare: &mut Vec<EndedRow>, vacant: &[VacantRow]) {
     let as_ended =
         |&(archetype, region, row, c): &VacantRow| (archetype, region, row, c, VACANT_KEY);
-    let order = |&(archetype, region, row, _, _): &EndedRow| (archetype, region, row);
-    if !vacant.is_sorted_by_key(|&(archetype, region, row, _)| (archetype, region, row)) {
+    if !vacant.is_sorted_by_key(|v| handout_order(&as_ended(v))) {
         ended.extend(vacant.iter().map(as_ended));
-        ended.sort_by_key(order);
+        ended.sort_by_key(handout_order);
         return;
     }
     spare.clear();
@@ -775,7 +781,7 @@ fn join_vacant_rows(ended: &mut Vec<EndedRow>, spare: &mut Vec<EndedRow>, vacant
     let (mut e, mut v) = (0, 0);
     while e < ended.len() && v < vacant.len() {
         let next = as_ended(&vacant[v]);
-        if order(&next) < order(&ended[e]) {
+        if handout_order(&next) < handout_order(&ended[e]) {
             spare.push(next);
             v += 1;
         } else {
