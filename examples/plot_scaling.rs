@@ -12,6 +12,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::ExitCode;
 
+#[path = "../benches/support/rounds.rs"]
+mod rounds;
+use rounds::median;
+
 /// One run of the table: its round, grain count, thread count and rate.
 struct Run {
     round: u32,
@@ -67,17 +71,6 @@ fn read_runs(path: &Path) -> Result<Vec<Run>, String> {
         });
     }
     Ok(runs)
-}
-
-/// The median of `values` (not empty).
-fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    }
 }
 
 /// Speed-up over 1 thread by grain count and thread count: the median over the rounds of
