@@ -30,7 +30,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = ROOT / "scenes" / "bench" / "chute.ron"
 DATA = ROOT / "scenes" / "bench" / "data.chute"
-GRAINS_PER_COPY = 32000
 STAGES = [
     "integrate_positions",
     "broad_phase",
@@ -99,6 +98,7 @@ def main():
 
     rate = {}  # (rep, threads) -> [rate per round]
     rss = {}
+    grain_count = {}  # rep -> grains, as the runs report them
     with open(args.tsv, "w") as tsv:
         tsv.write("round\tgrains\tthreads\tsteps\tgrain_steps_per_second\tpeak_rss_kib\t"
                   + "\t".join(f"{s}_us_per_step" for s in STAGES) + "\n")
@@ -113,6 +113,7 @@ def main():
                     g = wall["grain_steps_per_second"]
                     rate.setdefault((r, t), []).append(g)
                     rss.setdefault((r, t), []).append(peak)
+                    grain_count[r] = grains
                     stages = [wall["stages"].get(s, 0.0) * 1e6 / n_steps for s in STAGES]
                     tsv.write(f"{rnd}\t{grains}\t{t}\t{n_steps}\t{g:.0f}\t{peak}\t"
                               + "\t".join(f"{x:.1f}" for x in stages) + "\n")
@@ -133,7 +134,7 @@ def main():
             speedups = [a / b * base_threads for a, b in zip(rates, base)]
             small = rate.get((reps[0], t))
             per_grain = statistics.median(a / b for a, b in zip(rates, small)) if small else float("nan")
-            grains = GRAINS_PER_COPY * r * r
+            grains = grain_count[r]
             bpg = statistics.median(rss[(r, t)]) * 1024 / grains
             s = statistics.median(speedups)
             print(f"| {grains:,} | {t} | {statistics.median(rates) / 1e6:.2f} | {s:.2f} | "
