@@ -35,9 +35,12 @@ ROOT = Path(__file__).resolve().parents[2]
 SIZES = [(1, 100), (1, 1000), (2, 100), (4, 100)]
 
 
-def talus_scene(folder: Path, copies: int, steps: int) -> Path:
-    """The chute scene replicated `copies` x `copies` in x-y, run for `steps` steps."""
-    text = (ROOT / "scenes/bench/chute.ron").read_text()
+def talus_scene(folder: Path, copies: int, steps: int,
+                source: Path = ROOT / "scenes/bench/chute.ron", tag: str = "") -> Path:
+    """The chute scene `source` (this checkout's by default) replicated `copies` x `copies`
+    in x-y, run for `steps` steps, written into `folder` (which must hold `data.chute`);
+    `tag` tells apart the files of two sources."""
+    text = source.read_text()
     # Each substitution must find its text: a changed scene would otherwise race the wrong
     # packing without a word.
     for pattern, replacement in [
@@ -49,8 +52,8 @@ def talus_scene(folder: Path, copies: int, steps: int) -> Path:
     ]:
         text, found = re.subn(pattern, replacement, text, count=1)
         if found != 1:
-            sys.exit(f"race.py: scenes/bench/chute.ron has no `{pattern}` to replace")
-    path = folder / f"chute-{copies}x{copies}-{steps}.ron"
+            sys.exit(f"race.py: {source} has no `{pattern}` to replace")
+    path = folder / f"chute{tag}-{copies}x{copies}-{steps}.ron"
     path.write_text(text)
     return path
 
