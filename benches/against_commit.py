@@ -180,4 +180,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except subprocess.CalledProcessError as failed:
+        sys.exit(f"against_commit.py: `{' '.join(map(str, failed.cmd))}` failed "
+                 f"(exit status {failed.returncode})")
