@@ -28,7 +28,6 @@ from before a physics change gives other digits, which the page quoting the rati
 """
 
 import argparse
-import json
 import os
 import re
 import shutil
@@ -39,7 +38,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "lammps"))
-from race import ROOT, talus_scene  # noqa: E402  (the shared scene rewriting)
+from race import ROOT, talus_report, talus_scene  # noqa: E402  (shared with the LAMMPS race)
 
 # (replication in x and y, steps): the 32,000-grain chute over 1,000 steps, and the
 # 512,000-grain replica over 100.
@@ -83,15 +82,6 @@ def build_commit(commit: str, tree: Path, target_dir: Path) -> Path:
     subprocess.run(["cargo", "build", "--release", "--bin", "talus"], cwd=tree, check=True,
                    env={**os.environ, "CARGO_TARGET_DIR": str(target_dir)})
     return target_dir / "release/talus"
-
-
-def run(talus: Path, scene: Path, out: Path, threads: int) -> dict:
-    """One run's report."""
-    subprocess.run(
-        [str(talus), "run", str(scene), "--quiet", "--threads", str(threads), "--out", str(out)],
-        check=True, stdout=subprocess.DEVNULL,
-    )
-    return json.loads((out / "report.json").read_text())
 
 
 def energies(report: dict) -> str:
@@ -154,7 +144,7 @@ def main() -> None:
                 if round_ % 2 == 0:
                     sides.reverse()
                 for side, binary, scene in sides:
-                    report = run(binary, scene, folder / "out", args.threads)
+                    report = talus_report(binary, scene, folder / "out", args.threads)
                     rates[size][side].append(report["wall_clock"]["grain_steps_per_second"])
                     if round_ == 1:
                         print(f"{'old' if side == 0 else 'current'}, "

@@ -75,14 +75,18 @@ def lammps_rate(lmp: list[str], folder: Path, copies: int, steps: int) -> float:
     sys.exit(f"no loop time in {log}")
 
 
-def talus_rate(talus: str, scene: Path, out: Path, threads: int) -> float:
-    """Talus's grain-steps per second for one run on `threads` threads."""
+def talus_report(talus: str, scene: Path, out: Path, threads: int) -> dict:
+    """The `report.json` of one Talus run on `threads` threads."""
     subprocess.run(
-        [talus, "run", str(scene), "--quiet", "--threads", str(threads), "--out", str(out)],
+        [str(talus), "run", str(scene), "--quiet", "--threads", str(threads), "--out", str(out)],
         check=True, stdout=subprocess.DEVNULL,
     )
-    report = json.loads((out / "report.json").read_text())
-    return report["wall_clock"]["grain_steps_per_second"]
+    return json.loads((out / "report.json").read_text())
+
+
+def talus_rate(talus: str, scene: Path, out: Path, threads: int) -> float:
+    """Talus's grain-steps per second for one run on `threads` threads."""
+    return talus_report(talus, scene, out, threads)["wall_clock"]["grain_steps_per_second"]
 
 
 def main() -> None:
