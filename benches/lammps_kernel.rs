@@ -1,0 +1,609 @@
+//! LAMMPS's chute algorithm written out as one plain Rust kernel, raced against Talus's step
+//! on the same state: what a step with fewer passes — the overlap tests inside the force
+//! loop, contact history kept per neighbour-list entry, no contact entities — buys when
+//! compiled like Talus (`docs/performance.md`, "What the unmet targets would take").
+//!
+//! The kernel is `gran/hooke/history` with `newton on`, `nve/sphere`, `fix gravity` and
+//! `fix freeze` as LAMMPS's sources write them, over a half neighbour list with a skin of
+//! 0.1 that is rebuilt when a grain has moved more than half the skin (each step checked,
+//! as `neigh_modify every 1 delay 0`), the tangential histories carried over from the old
+//! list to the new by partner. It reads the state of `scenes/bench/chute.ron` after Talus
+//! has built it (the same grains, in the same order in memory: rows of cells), and it
+//! checks its own physics first: the kinetic energies after 100 steps against LAMMPS's
+//! output for `bench/in.chute` (the run stops if they leave it). A second, "refined" kernel
+//! judges the list's staleness by Talus's bound on the moves about their common part
+//! instead (fewer builds, the same results).
+//!
+//! The race: blocks of 7 steps of the two kernels and of Talus's step in turn, 1 thread,
+//! the first step of each block untimed (`benches/chute_blocks.rs`'s method), with each
+//! kernel's time split into list builds, force loop, and kicks with drift.
+//!
+//! `cargo bench --bench lammps_kernel` (40 rounds); `TALUS_ROUNDS=n` changes the rounds and
+//! `TALUS_REPLICA=r` races `r` × `r` copies of the chute as well, in an eighth as many
+//! rounds (0: the 32,000-grain chute alone, the default).
+
+use std::time::Instant;
+
+use glam::DVec3;
+
+#[path = "support/chute_halves.rs"]
+#[allow(dead_code)]
+mod chute_halves;
+use chute_halves::chute;
+#[path = "support/rounds.rs"]
+mod rounds;
+use rounds::median;
+use talus::core::schedule::Simulation;
+use talus::core::snapshot::GrainSnapshot;
+
+/// The `talus` binary's allocator, as in the other chute benches.
+#[global_allocator]
+static ALLOCATOR: talus::cli::alloc::HugePageAllocator = talus::cli::alloc::HugePageAllocator;
+
+/// Steps of a block; its first is not timed.
+const BLOCK_STEPS: u64 = 7;
+
+/// `bench/in.chute`'s constants (reduced units).
+const TIME_STEP: f64 = 1e-4;
+const NORMAL_STIFFNESS: f64 = 2e5;
+const TANGENTIAL_STIFFNESS: f64 = 2.0 / 7.0 * NORMAL_STIFFNESS;
+const NORMAL_DAMPING: f64 = 50.0;
+const FRICTION: f64 = 0.5;
+const SKIN: f64 = 0.1;
+/// `INERTIA` of LAMMPS's `fix nve/sphere`: a solid sphere's 2/5.
+const INERTIA: f64 = 0.4;
+
+/// LAMMPS's thermo output for `bench/in.chute` at step 100: Σ½mv² and Σ½Iω².
+const LAMMPS_STEP_100: (f64, f64) = (784292.08, 1571.0968);
+
+/// The chute's state as LAMMPS holds it: one array per quantity, grains in the order
+/// Talus's snapshot holds them.
+struct Kernel {
+    position: Vec<DVec3>,
+    velocity: Vec<DVec3>,
+    omega: Vec<DVec3>,
+    force: Vec<DVec3>,
+    torque: Vec<DVec3>,
+    radius: Vec<f64>,
+    mass: Vec<f64>,
+    /// Half a time step over the mass, and over the moment of inertia (0 for a frozen
+    /// grain): `fix nve/sphere`'s `dtfm` and `dtirotate`, taken once.
+    half_step_over_mass: Vec<f64>,
+    half_step_over_inertia: Vec<f64>,
+    frozen: Vec<bool>,
+    /// Periodic lengths along x and y.
+    box_length: [f64; 2],
+    gravity: DVec3,
+    /// The half neighbour list: grain i's partners (all after i in memory) are
+    /// `partner[first[i]..first[i + 1]]`, each pair with its tangential history.
+    first: Vec<usize>,
+    partner: Vec<u32>,
+    shear: Vec<DVec3>,
+    /// Positions at the list's build.
+    built_at: Vec<DVec3>,
+    /// LAMMPS's algorithm as it stands, or with the list's staleness judged by Talus's
+    /// bound on the moves about their common part (fewer builds, the same results).
+    refined: bool,
+    builds: u64,
+    /// Seconds spent in the list builds, the force loop (with gravity and the freeze)
+    /// and the rest of the steps (kicks, drift, staleness checks).
+    seconds: [f64; 3],
+}
+
+impl Kernel {
+    /// The state Talus's snapshot holds (after its priming pass: step 0).
+    /// `refined`: with Talus's staleness test (see the field).
+    fn from_snapshot(
+        s: &GrainSnapshot,
+        box_length: [f64; 2],
+        gravity: DVec3,
+        refined: bool,
+    ) -> Self {
+        let n = s.len();
+        let radius: Vec<f64> = (0..n).map(|i| s.radius(i)).collect();
+        // Density 1 (the data file's); a frozen grain's inverse mass is 0 in the snapshot.
+        let mass: Vec<f64> = radius
+            .iter()
+            .map(|r| 4.0 / 3.0 * std::f64::consts::PI * r * r * r)
+            .collect();
+        let frozen: Vec<bool> = (0..n).map(|i| s.inverse_mass(i) == 0.0).collect();
+        for i in 0..n {
+            if !frozen[i] {
+                let m = 1.0 / s.inverse_mass(i);
+                assert!((m - mass[i]).abs() <= 1e-12 * m, "grain {i}: density 1");
+            }
+        }
+        let half = 0.5 * TIME_STEP;
+        let half_step_over_mass = (0..n)
+            .map(|i| if frozen[i] { 0.0 } else { half / mass[i] })
+            .collect();
+        let half_step_over_inertia = (0..n)
+            .map(|i| {
+                let r = radius[i];
+                if frozen[i] {
+                    0.0
+                } else {
+                    half / (INERTIA * r * r * mass[i])
+                }
+            })
+            .collect();
+        let mut kernel = Self {
+            half_step_over_mass,
+            half_step_over_inertia,
+            position: (0..n).map(|i| s.position(i)).collect(),
+            velocity: (0..n).map(|i| s.velocity(i)).collect(),
+            omega: s.omega[..n].to_vec(),
+            force: vec![DVec3::ZERO; n],
+            torque: vec![DVec3::ZERO; n],
+            radius,
+            mass,
+            frozen,
+            box_length,
+            gravity,
+            first: Vec::new(),
+            partner: Vec::new(),
+            shear: Vec::new(),
+            built_at: Vec::new(),
+            refined,
+            builds: 0,
+            seconds: [0.0; 3],
+        };
+        kernel.build_list();
+        // LAMMPS's setup computes the first forces without advancing the histories.
+        kernel.forces(false);
+        kernel
+    }
+
+    /// `x_i − x_j` by the nearest image along x and y (LAMMPS's ghost grains need none),
+    /// without branches: a compare and a select per axis, as Talus's lanes take it (the
+    /// force loop took 62 ns a grain-step against 73 with a branch per axis).
+    #[inline(always)]
+    fn separation(&self, i: usize, j: usize) -> DVec3 {
+        let mut d = self.position[i] - self.position[j];
+        for (k, &length) in self.box_length.iter().enumerate() {
+            let half = 0.5 * length;
+            let up = if d[k] > half { length } else { 0.0 };
+            let down = if d[k] < -half { length } else { 0.0 };
+            d[k] = d[k] - up + down;
+        }
+        d
+    }
+
+    /// Bins the grains in cells at least one neighbour cut-off wide and keeps every pair
+    /// within it, each under its first grain in memory, frozen pairs excluded
+    /// (`neigh_modify exclude group bottom bottom`); carries each kept pair's tangential
+    /// history over from the old list.
+    fn build_list(&mut self) {
+        let n = self.position.len();
+        for p in &mut self.position {
+            for (k, &length) in self.box_length.iter().enumerate() {
+                p[k] = p[k].rem_euclid(length);
+            }
+        }
+        let max_radius = self.radius.iter().copied().fold(0.0, f64::max);
+        let cut = 2.0 * max_radius + SKIN;
+        let (z_min, z_max) = self
+            .position
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.z), hi.max(p.z))
+            });
+        let cells_along = |length: f64| ((length / cut).floor() as usize).max(1);
+        let (nx, ny) = (
+            cells_along(self.box_length[0]),
+            cells_along(self.box_length[1]),
+        );
+        let nz = cells_along(z_max - z_min + 1e-9);
+        let cell_edge = [
+            self.box_length[0] / nx as f64,
+            self.box_length[1] / ny as f64,
+            (z_max - z_min + 1e-9) / nz as f64,
+        ];
+        let cell_of = |p: DVec3| {
+            let cx = ((p.x / cell_edge[0]) as usize).min(nx - 1);
+            let cy = ((p.y / cell_edge[1]) as usize).min(ny - 1);
+            let cz = (((p.z - z_min) / cell_edge[2]) as usize).min(nz - 1);
+            [cx, cy, cz]
+        };
+        let index = |c: [usize; 3]| (c[2] * ny + c[1]) * nx + c[0];
+        // A counting sort of the grains by cell.
+        let mut start = vec![0usize; nx * ny * nz + 1];
+        let cells: Vec<[usize; 3]> = self.position.iter().map(|&p| cell_of(p)).collect();
+        for c in &cells {
+            start[index(*c) + 1] += 1;
+        }
+        for k in 1..start.len() {
+            start[k] += start[k - 1];
+        }
+        let mut fill = start.clone();
+        let mut sorted = vec![0u32; n];
+        for (i, c) in cells.iter().enumerate() {
+            sorted[fill[index(*c)]] = i as u32;
+            fill[index(*c)] += 1;
+        }
+        let wrap = |c: usize, d: isize, cells: usize| (c as isize + d).rem_euclid(cells as isize);
+        // Each cell's neighbouring cells, each once (a periodic axis may have fewer than
+        // three cells), listed once per build.
+        let mut around: Vec<[u32; 27]> = Vec::with_capacity(nx * ny * nz);
+        let mut around_len: Vec<u8> = Vec::with_capacity(nx * ny * nz);
+        for cz in 0..nz {
+            for cy in 0..ny {
+                for cx in 0..nx {
+                    let mut cells = [0u32; 27];
+                    let mut len = 0;
+                    for dz in -1isize..=1 {
+                        let z = cz as isize + dz;
+                        if z < 0 || z >= nz as isize {
+                            continue;
+                        }
+                        for dy in -1..=1 {
+                            for dx in -1..=1 {
+                                let c = index([
+                                    wrap(cx, dx, nx) as usize,
+                                    wrap(cy, dy, ny) as usize,
+                                    z as usize,
+                                ]) as u32;
+                                if !cells[..len].contains(&c) {
+                                    cells[len] = c;
+                                    len += 1;
+                                }
+                            }
+                        }
+                    }
+                    around.push(cells);
+                    around_len.push(len as u8);
+                }
+            }
+        }
+        let mut first = Vec::with_capacity(n + 1);
+        let mut partner = Vec::with_capacity(self.partner.len());
+        let mut shear = Vec::with_capacity(self.shear.len());
+        let mut neighbours: Vec<u32> = Vec::new();
+        for (i, &cell) in cells.iter().enumerate() {
+            first.push(partner.len());
+            neighbours.clear();
+            let home = index(cell);
+            for &c in &around[home][..around_len[home] as usize] {
+                let c = c as usize;
+                for &j in &sorted[start[c]..start[c + 1]] {
+                    let ju = j as usize;
+                    if ju <= i || (self.frozen[i] && self.frozen[ju]) {
+                        continue;
+                    }
+                    let reach = self.radius[i] + self.radius[ju] + SKIN;
+                    if self.separation(i, ju).length_squared() < reach * reach {
+                        neighbours.push(j);
+                    }
+                }
+            }
+            // In memory order, as a sorted packing's lists come out of LAMMPS's bins.
+            neighbours.sort_unstable();
+            let old = if self.first.is_empty() {
+                &[][..]
+            } else {
+                &self.partner[self.first[i]..self.first[i + 1]]
+            };
+            let old_start = self.first.get(i).copied().unwrap_or(0);
+            for &j in &neighbours {
+                let kept = old
+                    .iter()
+                    .position(|&o| o == j)
+                    .map_or(DVec3::ZERO, |k| self.shear[old_start + k]);
+                partner.push(j);
+                shear.push(kept);
+            }
+        }
+        first.push(partner.len());
+        self.first = first;
+        self.partner = partner;
+        self.shear = shear;
+        self.built_at = self.position.clone();
+        self.builds += 1;
+    }
+
+    /// Whether the list is stale: LAMMPS's test, any grain moved more than half the skin
+    /// since the build; the refined kernel's, Talus's bound D on every grain's move about
+    /// the moves' common part (the smaller of the largest move and the half diagonal of
+    /// the box bounding all moves) beyond half the skin (`architecture.md` §6).
+    fn list_stale(&self) -> bool {
+        if !self.refined {
+            let limit = 0.25 * SKIN * SKIN;
+            return self
+                .position
+                .iter()
+                .zip(&self.built_at)
+                .any(|(p, b)| (*p - *b).length_squared() > limit);
+        }
+        let (mut largest, mut low, mut high) = (0.0f64, DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for (p, b) in self.position.iter().zip(&self.built_at) {
+            let moved = *p - *b;
+            largest = largest.max(moved.length_squared());
+            low = low.min(moved);
+            high = high.max(moved);
+        }
+        largest.sqrt().min(0.5 * (high - low).length()) > 0.5 * SKIN
+    }
+
+    /// `pair gran/hooke/history` (`newton on`), then gravity and the frozen grains' forces
+    /// cleared (`fix gravity`, `fix freeze`). `advance`: whether the tangential histories
+    /// take the step (not in LAMMPS's setup, its `shearupdate`).
+    fn forces(&mut self, advance: bool) {
+        self.force.fill(DVec3::ZERO);
+        self.torque.fill(DVec3::ZERO);
+        let n = self.position.len();
+        for i in 0..n {
+            let radi = self.radius[i];
+            for k in self.first[i]..self.first[i + 1] {
+                let j = self.partner[k] as usize;
+                let del = self.separation(i, j);
+                let rsq = del.length_squared();
+                let radsum = radi + self.radius[j];
+                if rsq >= radsum * radsum {
+                    self.shear[k] = DVec3::ZERO;
+                } else {
+                    self.pair(i, j, k, del, rsq, advance);
+                }
+            }
+        }
+        for i in 0..n {
+            if self.frozen[i] {
+                self.force[i] = DVec3::ZERO;
+                self.torque[i] = DVec3::ZERO;
+            } else {
+                self.force[i] += self.mass[i] * self.gravity;
+            }
+        }
+    }
+
+    /// The force between touching grains `i` and `j`, pair `k` of the list, separated by
+    /// `del` (`x_i − x_j`, `rsq` its square): `gran/hooke/history`'s loop body.
+    #[inline(always)]
+    fn pair(&mut self, i: usize, j: usize, k: usize, del: DVec3, rsq: f64, advance: bool) {
+        let (radi, radj) = (self.radius[i], self.radius[j]);
+        let radsum = radi + radj;
+        let r = rsq.sqrt();
+        let rinv = 1.0 / r;
+        let rsqinv = 1.0 / rsq;
+        // Relative translational velocity, its normal and tangential parts.
+        let vr = self.velocity[i] - self.velocity[j];
+        let vnnr = vr.dot(del);
+        let vn = del * (vnnr * rsqinv);
+        let vt = vr - vn;
+        // Relative rotational velocity.
+        let wr = (radi * self.omega[i] + radj * self.omega[j]) * rinv;
+        let (mi, mj) = (self.mass[i], self.mass[j]);
+        let meff = if self.frozen[j] {
+            mi
+        } else if self.frozen[i] {
+            mj
+        } else {
+            mi * mj / (mi + mj)
+        };
+        // Normal force: Hookean contact and normal velocity damping.
+        let damp = meff * NORMAL_DAMPING * vnnr * rsqinv;
+        let ccel = NORMAL_STIFFNESS * (radsum - r) * rinv - damp;
+        // Relative tangential velocity at the contact (no tangential damping: `dampflag 0`).
+        let vtr = DVec3::new(
+            vt.x - (del.z * wr.y - del.y * wr.z),
+            vt.y - (del.x * wr.z - del.z * wr.x),
+            vt.z - (del.y * wr.x - del.x * wr.y),
+        );
+        // Shear history: the step's increment, then the projection onto the new tangent
+        // plane.
+        let mut shear = self.shear[k];
+        if advance {
+            shear += vtr * TIME_STEP;
+        }
+        let shrmag = shear.length();
+        let rsht = shear.dot(del) * rsqinv;
+        if advance {
+            shear -= del * rsht;
+        }
+        let mut fs = -TANGENTIAL_STIFFNESS * shear;
+        // Coulomb's limit.
+        let fs_mag = fs.length();
+        let fn_mag = FRICTION * (ccel * r).abs();
+        if fs_mag > fn_mag {
+            if shrmag != 0.0 {
+                shear *= fn_mag / fs_mag;
+                fs *= fn_mag / fs_mag;
+            } else {
+                fs = DVec3::ZERO;
+            }
+        }
+        self.shear[k] = shear;
+        let f = del * ccel + fs;
+        let tor = rinv
+            * DVec3::new(
+                del.y * fs.z - del.z * fs.y,
+                del.z * fs.x - del.x * fs.z,
+                del.x * fs.y - del.y * fs.x,
+            );
+        self.force[i] += f;
+        self.torque[i] -= radi * tor;
+        self.force[j] -= f;
+        self.torque[j] -= radj * tor;
+    }
+
+    /// `fix nve/sphere`'s half kick of the moving grains' velocities and spins.
+    fn kick(&mut self) {
+        // A frozen grain's factors are 0 and its force and torque are cleared: no branch.
+        for i in 0..self.position.len() {
+            self.velocity[i] += self.half_step_over_mass[i] * self.force[i];
+            self.omega[i] += self.half_step_over_inertia[i] * self.torque[i];
+        }
+    }
+
+    /// One velocity-Verlet step: kick, drift, the list rebuilt if stale, forces, kick.
+    fn step(&mut self) {
+        let start = Instant::now();
+        self.kick();
+        for i in 0..self.position.len() {
+            if !self.frozen[i] {
+                self.position[i] += TIME_STEP * self.velocity[i];
+            }
+        }
+        let stale = self.list_stale();
+        let drifted = Instant::now();
+        if stale {
+            self.build_list();
+        }
+        let built = Instant::now();
+        self.forces(true);
+        let forced = Instant::now();
+        self.kick();
+        let end = Instant::now();
+        self.seconds[0] += (built - drifted).as_secs_f64();
+        self.seconds[1] += (forced - built).as_secs_f64();
+        self.seconds[2] += (drifted - start).as_secs_f64() + (end - forced).as_secs_f64();
+    }
+
+    /// Σ½mv² and Σ½Iω² over every grain, as LAMMPS's `ke` and `erotate/sphere`.
+    fn energies(&self) -> (f64, f64) {
+        let mut translational = 0.0;
+        let mut rotational = 0.0;
+        for i in 0..self.position.len() {
+            let m = self.mass[i];
+            let r = self.radius[i];
+            translational += 0.5 * m * self.velocity[i].length_squared();
+            rotational += 0.5 * INERTIA * m * r * r * self.omega[i].length_squared();
+        }
+        (translational, rotational)
+    }
+}
+
+/// The chute of `replica` × `replica` copies, built and primed by Talus, with the plain
+/// and the refined kernel made from the same state.
+fn all_three(replica: u32) -> (Simulation, [Kernel; 2], usize) {
+    let (sim, grains) = chute(replica, replica, |_| {});
+    let tilt = 26f64.to_radians();
+    let gravity = DVec3::new(tilt.sin(), 0.0, -tilt.cos());
+    let box_length = [40.0 * f64::from(replica), 20.0 * f64::from(replica)];
+    let snapshot = sim.world.resource::<GrainSnapshot>();
+    let kernels =
+        [false, true].map(|refined| Kernel::from_snapshot(snapshot, box_length, gravity, refined));
+    (sim, kernels, grains)
+}
+
+/// Seconds of `BLOCK_STEPS − 1` timed steps, after one untimed.
+fn timed_block(mut step: impl FnMut()) -> f64 {
+    step();
+    let start = Instant::now();
+    for _ in 1..BLOCK_STEPS {
+        step();
+    }
+    start.elapsed().as_secs_f64()
+}
+
+/// One block of Talus's step, the pool's other workers polling as in `talus run`.
+fn talus_block(sim: &mut Simulation) -> f64 {
+    talus::core::workers::with_workers_polling(|| {
+        timed_block(|| sim.step_before_another().expect("the chute steps"))
+    })
+}
+
+/// Races the two kernels against Talus's step on `replica` × `replica` copies of the
+/// chute, the three in turn in each round, their order turning from round to round.
+fn race(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
+    let (mut sim, mut kernels, grains) = pool.install(|| all_three(replica));
+    // Warm up: lists built, tables sorted.
+    for kernel in &mut kernels {
+        for _ in 0..20 {
+            kernel.step();
+        }
+    }
+    pool.install(|| sim.run_steps(20).expect("the chute steps"));
+    let builds_before = kernels.each_ref().map(|k| k.builds);
+    let split_before = kernels.each_ref().map(|k| k.seconds);
+    // Seconds of [plain kernel, refined kernel, Talus], in all and per round.
+    let mut seconds = [0.0; 3];
+    let mut per_round: Vec<[f64; 3]> = Vec::with_capacity(rounds);
+    for round in 0..rounds {
+        let mut this = [0.0; 3];
+        for v in (0..3).map(|k| (k + round) % 3) {
+            this[v] = match v {
+                2 => pool.install(|| talus_block(&mut sim)),
+                k => timed_block(|| kernels[k].step()),
+            };
+        }
+        for v in 0..3 {
+            seconds[v] += this[v];
+        }
+        per_round.push(this);
+    }
+    let grain_steps = grains as f64 * (rounds as u64 * (BLOCK_STEPS - 1)) as f64;
+    let ns = |v: usize| seconds[v] / grain_steps * 1e9;
+    println!("{grains} grains, {rounds} rounds, ns a grain-step over all rounds:");
+    for (v, kernel) in kernels.iter().enumerate() {
+        // The parts count every step, the untimed ones too.
+        let steps = grains as f64 * (rounds as u64 * BLOCK_STEPS) as f64;
+        let part = |k: usize| (kernel.seconds[k] - split_before[v][k]) / steps * 1e9;
+        let touching = kernel.shear.iter().filter(|s| **s != DVec3::ZERO).count();
+        let against: Vec<f64> = per_round.iter().map(|r| r[2] / r[v]).collect();
+        println!(
+            "  the {} kernel {:.1} ({:.2} M grain-steps/s): list builds {:.1} ({} builds), \
+             force loop {:.1}, kicks, drift and staleness {:.1}; against Talus {:.3} over \
+             all rounds, {:.3} by the rounds' median; {:.2} listed pairs a grain, {:.2} \
+             touching",
+            if kernel.refined { "refined" } else { "plain" },
+            ns(v),
+            1e3 / ns(v),
+            part(0),
+            kernel.builds - builds_before[v],
+            part(1),
+            part(2),
+            ns(2) / ns(v),
+            median(against),
+            kernel.partner.len() as f64 / grains as f64,
+            touching as f64 / grains as f64,
+        );
+    }
+    println!("  Talus {:.1} ({:.2} M grain-steps/s)", ns(2), 1e3 / ns(2));
+}
+
+fn main() {
+    let env = |name: &str, default: usize| {
+        std::env::var(name)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(default)
+    };
+    let rounds = env("TALUS_ROUNDS", 40).max(1);
+    let replica = env("TALUS_REPLICA", 0) as u32;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a thread pool");
+    // The kernels' physics first: 100 steps from the data file's state against LAMMPS.
+    let (_, kernels, _) = pool.install(|| all_three(1));
+    for mut kernel in kernels {
+        let start = kernel.energies();
+        for _ in 0..100 {
+            kernel.step();
+        }
+        let (translational, rotational) = kernel.energies();
+        println!(
+            "the {} kernel, 100 steps: Σ½mv² {:.4} → {translational:.4} (gain {:+.4}; \
+             LAMMPS {:+.2}), Σ½Iω² {rotational:.6} (LAMMPS {}, relative difference \
+             {:.1e}); {} list builds",
+            if kernel.refined { "refined" } else { "plain" },
+            start.0,
+            translational - start.0,
+            LAMMPS_STEP_100.0 - 784139.13,
+            LAMMPS_STEP_100.1,
+            rotational / LAMMPS_STEP_100.1 - 1.0,
+            kernel.builds,
+        );
+        // LAMMPS prints 8 digits: a kernel outside them is not LAMMPS's algorithm, and
+        // its race would say nothing.
+        assert!(
+            (translational - LAMMPS_STEP_100.0).abs() < 0.01
+                && (rotational - LAMMPS_STEP_100.1).abs() < 1e-4,
+            "the kernel left LAMMPS's output"
+        );
+    }
+    race(1, rounds, &pool);
+    if replica > 1 {
+        race(replica, rounds.div_ceil(8), &pool);
+    }
+}
