@@ -1,7 +1,7 @@
 //! Measures how long a cache line takes to travel between two cores and back: the cost a
 //! parallel step pays whenever one thread reads what another wrote (a contact force, a
-//! grain's force total, a contact entity's row). `docs/performance.md` uses it to explain
-//! how far two threads can scale on a given machine.
+//! grain's force total, a contact entity's row). `docs/performance-log.md` uses it to
+//! explain how far two threads can scale on a given machine (session 18 on).
 //!
 //! `cargo run --release --example core_latency` prints the mean round trip in
 //! nanoseconds. The two threads spin, so on an idle machine the scheduler keeps them on

@@ -53,6 +53,7 @@ mod packing;
 mod periodic;
 mod pour_energy_balance;
 mod recording;
+mod reference_chute;
 mod region_stages;
 mod rest;
 mod rolling_friction;

@@ -1,0 +1,648 @@
+//! LAMMPS's chute algorithm (`bench/in.chute`) written out as one plain Rust kernel over
+//! the state Talus builds for `scenes/bench/chute.ron`: `gran/hooke/history` with
+//! `newton on`, `nve/sphere`, `fix gravity` and `fix freeze` as LAMMPS's sources write
+//! them, over a half neighbour list with a skin of 0.1, the tangential histories carried
+//! from list to list by partner. Its [`Variant`]s: LAMMPS's algorithm as it stands; the
+//! same with Talus's staleness test; and that one evaluating Talus's own linear law with
+//! Talus's contact life cycle. `benches/lammps_kernel.rs` races them against Talus's step;
+//! `tests/reference_chute.rs` checks Talus's step against the third.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use talus::contact::{ContactKinematics, ContactKinematicsLanes, ContactLaw};
+use talus::core::snapshot::GrainSnapshot;
+use talus_linear_spring::{LinearParams, LinearSpring, NormalDamping, TangentialSpring};
+
+/// `bench/in.chute`'s constants (reduced units).
+pub const TIME_STEP: f64 = 1e-4;
+const NORMAL_STIFFNESS: f64 = 2e5;
+const TANGENTIAL_STIFFNESS: f64 = 2.0 / 7.0 * NORMAL_STIFFNESS;
+const NORMAL_DAMPING: f64 = 50.0;
+const FRICTION: f64 = 0.5;
+const SKIN: f64 = 0.1;
+/// `INERTIA` of LAMMPS's `fix nve/sphere`: a solid sphere's 2/5.
+const INERTIA: f64 = 0.4;
+
+/// LAMMPS's thermo output for `bench/in.chute` at step 100: Σ½mv² and Σ½Iω².
+pub const LAMMPS_STEP_100: (f64, f64) = (784292.08, 1571.0968);
+
+/// Talus's own step-100 energies for the chute (`docs/performance.md`, "Same physics as
+/// LAMMPS"; `tests/chute.rs`): what the kernel with Talus's law must give.
+pub const TALUS_STEP_100: (f64, f64) = (784291.8947423529, 1571.2691153341918);
+
+/// Which law a kernel evaluates, and with which staleness test.
+#[derive(Clone, Copy, PartialEq)]
+pub enum Variant {
+    /// LAMMPS's algorithm as it stands.
+    Plain,
+    /// LAMMPS's algorithm with the list's staleness judged by Talus's bound on the moves
+    /// about their common part (fewer builds, the same results).
+    Refined,
+    /// The refined kernel evaluating Talus's linear law (`talus_linear_spring`, its lane
+    /// form, four contacts at a time) with Talus's contact life cycle: a contact made
+    /// where a pair first touches, evaluated while it touches and once more after it parts
+    /// if it carried a force, its history (the law's state, the last normal and overlap)
+    /// kept in the list's entry.
+    TalusLaw,
+}
+
+impl Variant {
+    /// Every variant, in the order the bench reports them.
+    pub const ALL: [Variant; 3] = [Variant::Plain, Variant::Refined, Variant::TalusLaw];
+
+    /// The variant's name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Variant::Plain => "plain",
+            Variant::Refined => "refined",
+            Variant::TalusLaw => "Talus-law",
+        }
+    }
+}
+
+/// A contact's history under Talus's law, kept in its neighbour-list entry.
+#[derive(Clone, Copy, Default)]
+struct TalusHistory {
+    spring: TangentialSpring,
+    /// Normal and overlap of the last evaluation (`ContactKinematics::set_displacement`).
+    normal: DVec3,
+    overlap: f64,
+}
+
+/// A contact of Talus's law waiting, with its kinematics, for three more to go through the
+/// law's lane form together (as Talus's force loop takes its contacts four at a time).
+#[derive(Clone, Copy, Default)]
+struct Pending {
+    i: usize,
+    j: usize,
+    k: usize,
+    kin: ContactKinematics,
+}
+
+/// Bits of a list entry's state under Talus's law.
+const ALIVE: u8 = 1;
+/// The contact carried a force at its last evaluation (`ContactForce::is_active`).
+const ACTIVE: u8 = 2;
+
+/// The chute's state as LAMMPS holds it: one array per quantity, grains in the order
+/// Talus's snapshot holds them.
+pub struct Kernel {
+    /// Centre positions (wrapped into the box at each list build), velocities and spins.
+    pub position: Vec<DVec3>,
+    pub velocity: Vec<DVec3>,
+    pub omega: Vec<DVec3>,
+    force: Vec<DVec3>,
+    torque: Vec<DVec3>,
+    radius: Vec<f64>,
+    mass: Vec<f64>,
+    /// Half a time step over the mass, and over the moment of inertia (0 for a frozen
+    /// grain): `fix nve/sphere`'s `dtfm` and `dtirotate`, taken once.
+    half_step_over_mass: Vec<f64>,
+    half_step_over_inertia: Vec<f64>,
+    frozen: Vec<bool>,
+    /// Periodic lengths along x and y.
+    box_length: [f64; 2],
+    gravity: DVec3,
+    /// The half neighbour list: grain i's partners (all after i in memory) are
+    /// `partner[first[i]..first[i + 1]]`, each pair with its tangential history.
+    first: Vec<usize>,
+    pub partner: Vec<u32>,
+    shear: Vec<DVec3>,
+    /// Positions at the list's build.
+    built_at: Vec<DVec3>,
+    /// The kernel's algorithm and law.
+    pub variant: Variant,
+    /// Talus's law: each entry's history and its `ALIVE` and `ACTIVE` bits.
+    history: Vec<TalusHistory>,
+    flags: Vec<u8>,
+    params: LinearParams,
+    inverse_mass: Vec<f64>,
+    /// Contacts of Talus's law waiting for the lane form, and how many.
+    pending: [Pending; 4],
+    pending_len: usize,
+    /// Neighbour-list builds so far.
+    pub builds: u64,
+    /// Seconds spent in the list builds, the force loop (with gravity and the freeze)
+    /// and the rest of the steps (kicks, drift, staleness checks).
+    pub seconds: [f64; 3],
+}
+
+impl Kernel {
+    /// The kernel `variant` from the state Talus's snapshot `s` holds after its priming
+    /// pass (step 0), in a box periodic along x and y of `box_length`, under `gravity`.
+    pub fn from_snapshot(
+        s: &GrainSnapshot,
+        box_length: [f64; 2],
+        gravity: DVec3,
+        variant: Variant,
+    ) -> Self {
+        let n = s.len();
+        let radius: Vec<f64> = (0..n).map(|i| s.radius(i)).collect();
+        // Density 1 (the data file's); a frozen grain's inverse mass is 0 in the snapshot.
+        let mass: Vec<f64> = radius
+            .iter()
+            .map(|r| 4.0 / 3.0 * std::f64::consts::PI * r * r * r)
+            .collect();
+        let frozen: Vec<bool> = (0..n).map(|i| s.inverse_mass(i) == 0.0).collect();
+        for i in 0..n {
+            if !frozen[i] {
+                let m = 1.0 / s.inverse_mass(i);
+                assert!((m - mass[i]).abs() <= 1e-12 * m, "grain {i}: density 1");
+            }
+        }
+        let half = 0.5 * TIME_STEP;
+        let half_step_over_mass = (0..n)
+            .map(|i| if frozen[i] { 0.0 } else { half / mass[i] })
+            .collect();
+        let half_step_over_inertia = (0..n)
+            .map(|i| {
+                let r = radius[i];
+                if frozen[i] {
+                    0.0
+                } else {
+                    half / (INERTIA * r * r * mass[i])
+                }
+            })
+            .collect();
+        let mut kernel = Self {
+            half_step_over_mass,
+            half_step_over_inertia,
+            position: (0..n).map(|i| s.position(i)).collect(),
+            velocity: (0..n).map(|i| s.velocity(i)).collect(),
+            omega: s.omega[..n].to_vec(),
+            force: vec![DVec3::ZERO; n],
+            torque: vec![DVec3::ZERO; n],
+            radius,
+            mass,
+            frozen,
+            box_length,
+            gravity,
+            first: Vec::new(),
+            partner: Vec::new(),
+            shear: Vec::new(),
+            built_at: Vec::new(),
+            variant,
+            history: Vec::new(),
+            flags: Vec::new(),
+            params: LinearParams {
+                normal_stiffness: NORMAL_STIFFNESS,
+                normal_damping: NormalDamping::Rate(NORMAL_DAMPING),
+                tangential_stiffness: TANGENTIAL_STIFFNESS,
+                tangential_damping_ratio: 0.0,
+                friction: FRICTION,
+            },
+            inverse_mass: (0..n).map(|i| s.inverse_mass(i)).collect(),
+            pending: [Pending::default(); 4],
+            pending_len: 0,
+            builds: 0,
+            seconds: [0.0; 3],
+        };
+        kernel.build_list();
+        // LAMMPS's setup computes the first forces without advancing the histories.
+        kernel.forces(false);
+        kernel
+    }
+
+    /// `x_i − x_j` by the nearest image along x and y (LAMMPS's ghost grains need none),
+    /// without branches: a compare and a select per axis, as Talus's lanes take it (the
+    /// force loop took 62 ns a grain-step against 73 with a branch per axis).
+    #[inline(always)]
+    fn separation(&self, i: usize, j: usize) -> DVec3 {
+        let mut d = self.position[i] - self.position[j];
+        for (k, &length) in self.box_length.iter().enumerate() {
+            let half = 0.5 * length;
+            let up = if d[k] > half { length } else { 0.0 };
+            let down = if d[k] < -half { length } else { 0.0 };
+            d[k] = d[k] - up + down;
+        }
+        d
+    }
+
+    /// Bins the grains in cells at least one neighbour cut-off wide and keeps every pair
+    /// within it, each under its first grain in memory, frozen pairs excluded
+    /// (`neigh_modify exclude group bottom bottom`); carries each kept pair's tangential
+    /// history over from the old list.
+    fn build_list(&mut self) {
+        let n = self.position.len();
+        for p in &mut self.position {
+            for (k, &length) in self.box_length.iter().enumerate() {
+                p[k] = p[k].rem_euclid(length);
+            }
+        }
+        let max_radius = self.radius.iter().copied().fold(0.0, f64::max);
+        let cut = 2.0 * max_radius + SKIN;
+        let (z_min, z_max) = self
+            .position
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.z), hi.max(p.z))
+            });
+        let cells_along = |length: f64| ((length / cut).floor() as usize).max(1);
+        let (nx, ny) = (
+            cells_along(self.box_length[0]),
+            cells_along(self.box_length[1]),
+        );
+        let nz = cells_along(z_max - z_min + 1e-9);
+        let cell_edge = [
+            self.box_length[0] / nx as f64,
+            self.box_length[1] / ny as f64,
+            (z_max - z_min + 1e-9) / nz as f64,
+        ];
+        let cell_of = |p: DVec3| {
+            let cx = ((p.x / cell_edge[0]) as usize).min(nx - 1);
+            let cy = ((p.y / cell_edge[1]) as usize).min(ny - 1);
+            let cz = (((p.z - z_min) / cell_edge[2]) as usize).min(nz - 1);
+            [cx, cy, cz]
+        };
+        let index = |c: [usize; 3]| (c[2] * ny + c[1]) * nx + c[0];
+        // A counting sort of the grains by cell.
+        let mut start = vec![0usize; nx * ny * nz + 1];
+        let cells: Vec<[usize; 3]> = self.position.iter().map(|&p| cell_of(p)).collect();
+        for c in &cells {
+            start[index(*c) + 1] += 1;
+        }
+        for k in 1..start.len() {
+            start[k] += start[k - 1];
+        }
+        let mut fill = start.clone();
+        let mut sorted = vec![0u32; n];
+        for (i, c) in cells.iter().enumerate() {
+            sorted[fill[index(*c)]] = i as u32;
+            fill[index(*c)] += 1;
+        }
+        let wrap = |c: usize, d: isize, cells: usize| (c as isize + d).rem_euclid(cells as isize);
+        // Each cell's neighbouring cells, each once (a periodic axis may have fewer than
+        // three cells), listed once per build.
+        let mut around: Vec<[u32; 27]> = Vec::with_capacity(nx * ny * nz);
+        let mut around_len: Vec<u8> = Vec::with_capacity(nx * ny * nz);
+        for cz in 0..nz {
+            for cy in 0..ny {
+                for cx in 0..nx {
+                    let mut cells = [0u32; 27];
+                    let mut len = 0;
+                    for dz in -1isize..=1 {
+                        let z = cz as isize + dz;
+                        if z < 0 || z >= nz as isize {
+                            continue;
+                        }
+                        for dy in -1..=1 {
+                            for dx in -1..=1 {
+                                let c = index([
+                                    wrap(cx, dx, nx) as usize,
+                                    wrap(cy, dy, ny) as usize,
+                                    z as usize,
+                                ]) as u32;
+                                if !cells[..len].contains(&c) {
+                                    cells[len] = c;
+                                    len += 1;
+                                }
+                            }
+                        }
+                    }
+                    around.push(cells);
+                    around_len.push(len as u8);
+                }
+            }
+        }
+        let mut first = Vec::with_capacity(n + 1);
+        let mut partner = Vec::with_capacity(self.partner.len());
+        let mut shear = Vec::with_capacity(self.shear.len());
+        let mut history = Vec::with_capacity(self.history.len());
+        let mut flags = Vec::with_capacity(self.flags.len());
+        let talus_law = self.variant == Variant::TalusLaw;
+        let mut neighbours: Vec<u32> = Vec::new();
+        for (i, &cell) in cells.iter().enumerate() {
+            first.push(partner.len());
+            neighbours.clear();
+            let home = index(cell);
+            for &c in &around[home][..around_len[home] as usize] {
+                let c = c as usize;
+                for &j in &sorted[start[c]..start[c + 1]] {
+                    let ju = j as usize;
+                    if ju <= i || (self.frozen[i] && self.frozen[ju]) {
+                        continue;
+                    }
+                    let reach = self.radius[i] + self.radius[ju] + SKIN;
+                    if self.separation(i, ju).length_squared() < reach * reach {
+                        neighbours.push(j);
+                    }
+                }
+            }
+            // In memory order, as a sorted packing's lists come out of LAMMPS's bins.
+            neighbours.sort_unstable();
+            let old = if self.first.is_empty() {
+                &[][..]
+            } else {
+                &self.partner[self.first[i]..self.first[i + 1]]
+            };
+            let old_start = self.first.get(i).copied().unwrap_or(0);
+            for &j in &neighbours {
+                let found = old.iter().position(|&o| o == j).map(|k| old_start + k);
+                partner.push(j);
+                if talus_law {
+                    history.push(found.map_or(TalusHistory::default(), |k| self.history[k]));
+                    flags.push(found.map_or(0, |k| self.flags[k]));
+                } else {
+                    shear.push(found.map_or(DVec3::ZERO, |k| self.shear[k]));
+                }
+            }
+        }
+        first.push(partner.len());
+        self.first = first;
+        self.partner = partner;
+        self.shear = shear;
+        self.history = history;
+        self.flags = flags;
+        self.built_at = self.position.clone();
+        self.builds += 1;
+    }
+
+    /// Whether the list is stale: LAMMPS's test, any grain moved more than half the skin
+    /// since the build; the others', Talus's bound D on every grain's move about
+    /// the moves' common part (the smaller of the largest move and the half diagonal of
+    /// the box bounding all moves) beyond half the skin (`architecture.md` §6).
+    fn list_stale(&self) -> bool {
+        if self.variant == Variant::Plain {
+            let limit = 0.25 * SKIN * SKIN;
+            return self
+                .position
+                .iter()
+                .zip(&self.built_at)
+                .any(|(p, b)| (*p - *b).length_squared() > limit);
+        }
+        let (mut largest, mut low, mut high) = (0.0f64, DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for (p, b) in self.position.iter().zip(&self.built_at) {
+            let moved = *p - *b;
+            largest = largest.max(moved.length_squared());
+            low = low.min(moved);
+            high = high.max(moved);
+        }
+        largest.sqrt().min(0.5 * (high - low).length()) > 0.5 * SKIN
+    }
+
+    /// `pair gran/hooke/history` (`newton on`), then gravity and the frozen grains' forces
+    /// cleared (`fix gravity`, `fix freeze`). `advance`: whether the tangential histories
+    /// take the step (not in LAMMPS's setup, its `shearupdate`).
+    fn forces(&mut self, advance: bool) {
+        self.force.fill(DVec3::ZERO);
+        self.torque.fill(DVec3::ZERO);
+        let n = self.position.len();
+        for i in 0..n {
+            let radi = self.radius[i];
+            for k in self.first[i]..self.first[i + 1] {
+                let j = self.partner[k] as usize;
+                let del = self.separation(i, j);
+                let rsq = del.length_squared();
+                let radsum = radi + self.radius[j];
+                let touching = rsq < radsum * radsum;
+                if self.variant == Variant::TalusLaw {
+                    // Made on touching; kept while touching, and for one evaluation after
+                    // the bodies part if it carried a force (Talus's narrow phase).
+                    if touching || self.flags[k] == ALIVE | ACTIVE {
+                        self.talus_pair(i, j, k, del, advance);
+                    } else {
+                        self.flags[k] = 0;
+                    }
+                } else if touching {
+                    self.pair(i, j, k, del, rsq, advance);
+                } else {
+                    self.shear[k] = DVec3::ZERO;
+                }
+            }
+        }
+        if self.pending_len > 0 {
+            self.flush_talus(advance);
+        }
+        for i in 0..n {
+            if self.frozen[i] {
+                self.force[i] = DVec3::ZERO;
+                self.torque[i] = DVec3::ZERO;
+            } else {
+                self.force[i] += self.mass[i] * self.gravity;
+            }
+        }
+    }
+
+    /// The force between touching grains `i` and `j`, pair `k` of the list, separated by
+    /// `del` (`x_i − x_j`, `rsq` its square): `gran/hooke/history`'s loop body.
+    #[inline(always)]
+    fn pair(&mut self, i: usize, j: usize, k: usize, del: DVec3, rsq: f64, advance: bool) {
+        let (radi, radj) = (self.radius[i], self.radius[j]);
+        let radsum = radi + radj;
+        let r = rsq.sqrt();
+        let rinv = 1.0 / r;
+        let rsqinv = 1.0 / rsq;
+        // Relative translational velocity, its normal and tangential parts.
+        let vr = self.velocity[i] - self.velocity[j];
+        let vnnr = vr.dot(del);
+        let vn = del * (vnnr * rsqinv);
+        let vt = vr - vn;
+        // Relative rotational velocity.
+        let wr = (radi * self.omega[i] + radj * self.omega[j]) * rinv;
+        let (mi, mj) = (self.mass[i], self.mass[j]);
+        let meff = if self.frozen[j] {
+            mi
+        } else if self.frozen[i] {
+            mj
+        } else {
+            mi * mj / (mi + mj)
+        };
+        // Normal force: Hookean contact and normal velocity damping.
+        let damp = meff * NORMAL_DAMPING * vnnr * rsqinv;
+        let ccel = NORMAL_STIFFNESS * (radsum - r) * rinv - damp;
+        // Relative tangential velocity at the contact (no tangential damping: `dampflag 0`).
+        let vtr = DVec3::new(
+            vt.x - (del.z * wr.y - del.y * wr.z),
+            vt.y - (del.x * wr.z - del.z * wr.x),
+            vt.z - (del.y * wr.x - del.x * wr.y),
+        );
+        // Shear history: the step's increment, then the projection onto the new tangent
+        // plane.
+        let mut shear = self.shear[k];
+        if advance {
+            shear += vtr * TIME_STEP;
+        }
+        let shrmag = shear.length();
+        let rsht = shear.dot(del) * rsqinv;
+        if advance {
+            shear -= del * rsht;
+        }
+        let mut fs = -TANGENTIAL_STIFFNESS * shear;
+        // Coulomb's limit.
+        let fs_mag = fs.length();
+        let fn_mag = FRICTION * (ccel * r).abs();
+        if fs_mag > fn_mag {
+            if shrmag != 0.0 {
+                shear *= fn_mag / fs_mag;
+                fs *= fn_mag / fs_mag;
+            } else {
+                fs = DVec3::ZERO;
+            }
+        }
+        self.shear[k] = shear;
+        let f = del * ccel + fs;
+        let tor = rinv
+            * DVec3::new(
+                del.y * fs.z - del.z * fs.y,
+                del.z * fs.x - del.x * fs.z,
+                del.x * fs.y - del.y * fs.x,
+            );
+        self.force[i] += f;
+        self.torque[i] -= radi * tor;
+        self.force[j] -= f;
+        self.torque[j] -= radj * tor;
+    }
+
+    /// Talus's linear law between grains `i` and `j` (entry `k`, separated by `del`): the
+    /// kinematics as `ContactKinematics::grain_grain` forms them, queued for the law's lane
+    /// form (`flush_talus`). Not `advance`: the evaluation of Talus's priming pass (a time
+    /// step of 0).
+    #[inline(always)]
+    fn talus_pair(&mut self, i: usize, j: usize, k: usize, del: DVec3, advance: bool) {
+        let (ra, rb) = (self.radius[i], self.radius[j]);
+        let dist = del.length();
+        let normal = if dist > 0.0 {
+            del * (1.0 / dist)
+        } else {
+            DVec3::Z
+        };
+        let overlap = ra + rb - dist;
+        let branch_a = -normal * (ra - 0.5 * overlap);
+        let branch_b = normal * (rb - 0.5 * overlap);
+        let (wa, wb) = (self.omega[i], self.omega[j]);
+        let relative_velocity =
+            (self.velocity[i] + wa.cross(branch_a)) - (self.velocity[j] + wb.cross(branch_b));
+        let normal_velocity = relative_velocity.dot(normal);
+        let mut kin = ContactKinematics {
+            normal,
+            overlap,
+            point: self.position[i] + branch_a,
+            branch_a,
+            branch_b,
+            relative_velocity,
+            normal_velocity,
+            tangential_velocity: relative_velocity - normal * normal_velocity,
+            displacement: DVec3::ZERO,
+            previous_overlap: 0.0,
+            previous_normal: DVec3::ZERO,
+            relative_omega: wa - wb,
+            effective_mass: 1.0 / (self.inverse_mass[i] + self.inverse_mass[j]),
+            effective_radius: ra * rb / (ra + rb),
+            min_radius: ra.min(rb),
+        };
+        let dt = if advance { TIME_STEP } else { 0.0 };
+        let history = &mut self.history[k];
+        if self.flags[k] & ALIVE == 0 {
+            *history = TalusHistory::default();
+        }
+        kin.set_displacement(history.normal, history.overlap, wa, wb, dt);
+        self.pending[self.pending_len] = Pending { i, j, k, kin };
+        self.pending_len += 1;
+        if self.pending_len == 4 {
+            self.flush_talus(advance);
+        }
+    }
+
+    /// Evaluates the queued contacts of Talus's law: four through the law's lane form
+    /// without energies (Talus's force loop at an unobserved step), fewer one at a time
+    /// through its scalar form (the same bits); then their histories and flags, and the
+    /// forces and torques as Talus's force loop and sums apply them.
+    fn flush_talus(&mut self, advance: bool) {
+        let dt = if advance { TIME_STEP } else { 0.0 };
+        let pending = self.pending;
+        let n = std::mem::take(&mut self.pending_len);
+        let mut response = [(DVec3::ZERO, DVec3::ZERO, DVec3::ZERO); 4];
+        if n == 4 {
+            let kin = ContactKinematicsLanes::from_scalar(pending.map(|p| p.kin));
+            let springs = self
+                .history
+                .get_disjoint_mut(pending.map(|p| p.k))
+                .expect("four distinct entries")
+                .map(|h| &mut h.spring);
+            let params = [&self.params; 4];
+            let (_, r) = LinearSpring::evaluate_lanes(params, &kin, springs, 0xF, dt, false);
+            let force = r.force.to_array();
+            let torque_a = (kin.branch_a.cross(r.force) + r.torque_a).to_array();
+            let torque_b = (kin.branch_b.cross(-r.force) + r.torque_b).to_array();
+            for l in 0..4 {
+                response[l] = (force[l], torque_a[l], torque_b[l]);
+            }
+        } else {
+            for l in 0..n {
+                let p = &pending[l];
+                let spring = &mut self.history[p.k].spring;
+                let r = LinearSpring::evaluate(&self.params, &p.kin, spring, dt);
+                response[l] = (
+                    r.force,
+                    p.kin.branch_a.cross(r.force) + r.torque_a,
+                    p.kin.branch_b.cross(-r.force) + r.torque_b,
+                );
+            }
+        }
+        for (p, &(force, torque_a, torque_b)) in pending[..n].iter().zip(&response) {
+            let history = &mut self.history[p.k];
+            history.normal = p.kin.normal;
+            history.overlap = p.kin.overlap;
+            let active = p.kin.overlap > 0.0 || force != DVec3::ZERO;
+            self.flags[p.k] = ALIVE | if active { ACTIVE } else { 0 };
+            self.force[p.i] += force;
+            self.force[p.j] -= force;
+            self.torque[p.i] += torque_a;
+            self.torque[p.j] += torque_b;
+        }
+    }
+
+    /// `fix nve/sphere`'s half kick of the moving grains' velocities and spins.
+    fn kick(&mut self) {
+        // A frozen grain's factors are 0 and its force and torque are cleared: no branch.
+        for i in 0..self.position.len() {
+            self.velocity[i] += self.half_step_over_mass[i] * self.force[i];
+            self.omega[i] += self.half_step_over_inertia[i] * self.torque[i];
+        }
+    }
+
+    /// One velocity-Verlet step: kick, drift, the list rebuilt if stale, forces, kick.
+    pub fn step(&mut self) {
+        let start = Instant::now();
+        self.kick();
+        for i in 0..self.position.len() {
+            if !self.frozen[i] {
+                self.position[i] += TIME_STEP * self.velocity[i];
+            }
+        }
+        let stale = self.list_stale();
+        let drifted = Instant::now();
+        if stale {
+            self.build_list();
+        }
+        let built = Instant::now();
+        self.forces(true);
+        let forced = Instant::now();
+        self.kick();
+        let end = Instant::now();
+        self.seconds[0] += (built - drifted).as_secs_f64();
+        self.seconds[1] += (forced - built).as_secs_f64();
+        self.seconds[2] += (drifted - start).as_secs_f64() + (end - forced).as_secs_f64();
+    }
+
+    /// Contacts of Talus's law that carried a force at their last evaluation: the count
+    /// Talus reports (`ContactForce::is_active`). None for LAMMPS's law.
+    pub fn active_contacts(&self) -> Option<usize> {
+        (self.variant == Variant::TalusLaw)
+            .then(|| self.flags.iter().filter(|&&f| f & ACTIVE != 0).count())
+    }
+
+    /// Σ½mv² and Σ½Iω² over every grain, as LAMMPS's `ke` and `erotate/sphere`.
+    pub fn energies(&self) -> (f64, f64) {
+        let mut translational = 0.0;
+        let mut rotational = 0.0;
+        for i in 0..self.position.len() {
+            let m = self.mass[i];
+            let r = self.radius[i];
+            translational += 0.5 * m * self.velocity[i].length_squared();
+            rotational += 0.5 * INERTIA * m * r * r * self.omega[i].length_squared();
+        }
+        (translational, rotational)
+    }
+}
