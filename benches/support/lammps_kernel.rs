@@ -497,7 +497,9 @@ impl Kernel {
     /// Talus's linear law between grains `i` and `j` (entry `k`, separated by `del`): the
     /// kinematics as `ContactKinematics::grain_grain` forms them, queued for the law's lane
     /// form (`flush_talus`). Not `advance`: the evaluation of Talus's priming pass (a time
-    /// step of 0).
+    /// step of 0). The kinematics are written out again on purpose, from the kernel's own
+    /// arrays: `tests/reference_chute.rs` holds Talus to this kernel, which shares only the
+    /// law with it.
     #[inline(always)]
     fn talus_pair(&mut self, i: usize, j: usize, k: usize, del: DVec3, advance: bool) {
         let (ra, rb) = (self.radius[i], self.radius[j]);
