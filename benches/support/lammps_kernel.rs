@@ -10,7 +10,8 @@
 use std::time::Instant;
 
 use glam::DVec3;
-use talus::contact::{ContactKinematics, ContactKinematicsLanes, ContactLaw};
+use talus::contact::{ContactKinematicsLanes, ContactLaw, SpinLanes};
+use talus::core::lanes::{F4, V4};
 use talus::core::snapshot::GrainSnapshot;
 use talus_linear_spring::{LinearParams, LinearSpring, NormalDamping, TangentialSpring};
 
@@ -70,14 +71,15 @@ struct TalusHistory {
     overlap: f64,
 }
 
-/// A contact of Talus's law waiting, with its kinematics, for three more to go through the
-/// law's lane form together (as Talus's force loop takes its contacts four at a time).
+/// A contact of Talus's law waiting for three more to go through the kinematics and the
+/// law's lane form together (as Talus's force loop takes its contacts four at a time): its
+/// grains, its list entry and the grains' separation `x_i − x_j`.
 #[derive(Clone, Copy, Default)]
 struct Pending {
     i: usize,
     j: usize,
     k: usize,
-    kin: ContactKinematics,
+    del: DVec3,
 }
 
 /// Bits of a list entry's state under Talus's law.
@@ -494,104 +496,105 @@ impl Kernel {
         self.torque[j] -= radj * tor;
     }
 
-    /// Talus's linear law between grains `i` and `j` (entry `k`, separated by `del`): the
-    /// kinematics as `ContactKinematics::grain_grain` forms them, queued for the law's lane
-    /// form (`flush_talus`). Not `advance`: the evaluation of Talus's priming pass (a time
-    /// step of 0). The kinematics are written out again on purpose, from the kernel's own
-    /// arrays: `tests/reference_chute.rs` holds Talus to this kernel, which shares only the
-    /// law with it.
+    /// Queues Talus's linear law between grains `i` and `j` (entry `k`, separated by
+    /// `del`) for the lanes of `flush_talus`.
     #[inline(always)]
     fn talus_pair(&mut self, i: usize, j: usize, k: usize, del: DVec3, advance: bool) {
-        let (ra, rb) = (self.radius[i], self.radius[j]);
-        let dist = del.length();
-        let normal = if dist > 0.0 {
-            del * (1.0 / dist)
-        } else {
-            DVec3::Z
-        };
-        let overlap = ra + rb - dist;
-        let branch_a = -normal * (ra - 0.5 * overlap);
-        let branch_b = normal * (rb - 0.5 * overlap);
-        let (wa, wb) = (self.omega[i], self.omega[j]);
-        let relative_velocity =
-            (self.velocity[i] + wa.cross(branch_a)) - (self.velocity[j] + wb.cross(branch_b));
-        let normal_velocity = relative_velocity.dot(normal);
-        let mut kin = ContactKinematics {
-            normal,
-            overlap,
-            point: self.position[i] + branch_a,
-            branch_a,
-            branch_b,
-            relative_velocity,
-            normal_velocity,
-            tangential_velocity: relative_velocity - normal * normal_velocity,
-            displacement: DVec3::ZERO,
-            previous_overlap: 0.0,
-            previous_normal: DVec3::ZERO,
-            relative_omega: wa - wb,
-            effective_mass: 1.0 / (self.inverse_mass[i] + self.inverse_mass[j]),
-            effective_radius: ra * rb / (ra + rb),
-            min_radius: ra.min(rb),
-        };
-        let dt = if advance { TIME_STEP } else { 0.0 };
-        let history = &mut self.history[k];
-        if self.flags[k] & ALIVE == 0 {
-            *history = TalusHistory::default();
-        }
-        kin.set_displacement(history.normal, history.overlap, wa, wb, dt);
-        self.pending[self.pending_len] = Pending { i, j, k, kin };
+        self.pending[self.pending_len] = Pending { i, j, k, del };
         self.pending_len += 1;
         if self.pending_len == 4 {
             self.flush_talus(advance);
         }
     }
 
-    /// Evaluates the queued contacts of Talus's law: four through the law's lane form
-    /// without energies (Talus's force loop at an unobserved step), fewer one at a time
-    /// through its scalar form (the same bits); then their histories and flags, and the
-    /// forces and torques as Talus's force loop and sums apply them.
+    /// Evaluates the queued contacts of Talus's law, four lanes at a time (fewer at the
+    /// loop's end, the empty lanes repeating the first): their kinematics as
+    /// `ContactKinematics::grain_grain` forms them, gathered from the kernel's arrays; the
+    /// law's lane form without energies (Talus's force loop at an unobserved step); then
+    /// their histories and flags, and the forces and torques as Talus's force loop and sums
+    /// apply them. Not `advance`: the evaluation of Talus's priming pass (a time step of 0).
+    /// The kinematics are written out again on purpose, from the kernel's own arrays:
+    /// `tests/reference_chute.rs` holds Talus to this kernel, which shares with it only the
+    /// law and `ContactKinematicsLanes::set_displacement`.
     fn flush_talus(&mut self, advance: bool) {
         let dt = if advance { TIME_STEP } else { 0.0 };
-        let pending = self.pending;
         let n = std::mem::take(&mut self.pending_len);
-        let mut response = [(DVec3::ZERO, DVec3::ZERO, DVec3::ZERO); 4];
-        if n == 4 {
-            let kin = ContactKinematicsLanes::from_scalar(pending.map(|p| p.kin));
-            let springs = self
-                .history
-                .get_disjoint_mut(pending.map(|p| p.k))
-                .expect("four distinct entries")
-                .map(|h| &mut h.spring);
-            let params = [&self.params; 4];
-            let (_, r) = LinearSpring::evaluate_lanes(params, &kin, springs, 0xF, dt, false);
-            let force = r.force.to_array();
-            let torque_a = (kin.branch_a.cross(r.force) + r.torque_a).to_array();
-            let torque_b = (kin.branch_b.cross(-r.force) + r.torque_b).to_array();
-            for l in 0..4 {
-                response[l] = (force[l], torque_a[l], torque_b[l]);
-            }
-        } else {
-            for l in 0..n {
-                let p = &pending[l];
-                let spring = &mut self.history[p.k].spring;
-                let r = LinearSpring::evaluate(&self.params, &p.kin, spring, dt);
-                response[l] = (
-                    r.force,
-                    p.kin.branch_a.cross(r.force) + r.torque_a,
-                    p.kin.branch_b.cross(-r.force) + r.torque_b,
-                );
+        let pending: [Pending; 4] = std::array::from_fn(|l| self.pending[l.min(n - 1)]);
+        // A contact's first evaluation starts from a default history.
+        for p in &pending[..n] {
+            if self.flags[p.k] & ALIVE == 0 {
+                self.history[p.k] = TalusHistory::default();
             }
         }
-        for (p, &(force, torque_a, torque_b)) in pending[..n].iter().zip(&response) {
-            let history = &mut self.history[p.k];
-            history.normal = p.kin.normal;
-            history.overlap = p.kin.overlap;
-            let active = p.kin.overlap > 0.0 || force != DVec3::ZERO;
+        let (i, j) = (pending.map(|p| p.i), pending.map(|p| p.j));
+        let lanes_of = |v: &[DVec3], g: [usize; 4]| V4::from_fn(|l| v[g[l]]);
+        let scalars_of = |v: &[f64], g: [usize; 4]| F4::from_fn(|l| v[g[l]]);
+        let (ra, rb) = (scalars_of(&self.radius, i), scalars_of(&self.radius, j));
+        let d = V4::from_fn(|l| pending[l].del);
+        let dist = d.length();
+        let zero = F4::zero();
+        let normal = dist
+            .gt(zero)
+            .select3(d * (F4::splat(1.0) / dist), V4::splat(DVec3::Z));
+        let overlap = ra + rb - dist;
+        let half = F4::splat(0.5);
+        let branch_a = -normal * (ra - half * overlap);
+        let branch_b = normal * (rb - half * overlap);
+        let (wa, wb) = (lanes_of(&self.omega, i), lanes_of(&self.omega, j));
+        let (va, vb) = (lanes_of(&self.velocity, i), lanes_of(&self.velocity, j));
+        let relative_velocity = (va + wa.cross(branch_a)) - (vb + V4::zero() + wb.cross(branch_b));
+        let normal_velocity = relative_velocity.dot(normal);
+        let inverse_mass = (
+            scalars_of(&self.inverse_mass, i),
+            scalars_of(&self.inverse_mass, j),
+        );
+        let mut kin = ContactKinematicsLanes {
+            normal,
+            overlap,
+            point: lanes_of(&self.position, i) + branch_a,
+            branch_a,
+            branch_b,
+            relative_velocity,
+            normal_velocity,
+            tangential_velocity: relative_velocity - normal * normal_velocity,
+            displacement: V4::zero(),
+            previous_overlap: zero,
+            previous_normal: V4::zero(),
+            relative_omega: wa - wb,
+            effective_mass: F4::splat(1.0) / (inverse_mass.0 + inverse_mass.1),
+            effective_radius: ra * rb / (ra + rb),
+            min_radius: rb.lt(ra).select(rb, ra),
+        };
+        let previous = pending.map(|p| self.history[p.k]);
+        kin.set_displacement(
+            V4::from_fn(|l| previous[l].normal),
+            F4::from_fn(|l| previous[l].overlap),
+            SpinLanes { a: wa, b: wb },
+            dt,
+        );
+        // The padding lanes work on copies; the queued ones on their entries' springs.
+        let mut springs = previous.map(|h| h.spring);
+        let params = [&self.params; 4];
+        let lanes = (1u32 << n) - 1;
+        let (_, r) =
+            LinearSpring::evaluate_lanes(params, &kin, springs.each_mut(), lanes, dt, false);
+        let force = r.force.to_array();
+        let torque_a = (kin.branch_a.cross(r.force) + r.torque_a).to_array();
+        let torque_b = (kin.branch_b.cross(-r.force) + r.torque_b).to_array();
+        let (normal, overlap) = (kin.normal.to_array(), kin.overlap.to_array());
+        for l in 0..n {
+            let p = pending[l];
+            self.history[p.k] = TalusHistory {
+                spring: springs[l],
+                normal: normal[l],
+                overlap: overlap[l],
+            };
+            let active = overlap[l] > 0.0 || force[l] != DVec3::ZERO;
             self.flags[p.k] = ALIVE | if active { ACTIVE } else { 0 };
-            self.force[p.i] += force;
-            self.force[p.j] -= force;
-            self.torque[p.i] += torque_a;
-            self.torque[p.j] += torque_b;
+            self.force[p.i] += force[l];
+            self.force[p.j] -= force[l];
+            self.torque[p.i] += torque_a[l];
+            self.torque[p.j] += torque_b[l];
         }
     }
 
