@@ -8,16 +8,19 @@
 //! 0.1 that is rebuilt when a grain has moved more than half the skin (each step checked,
 //! as `neigh_modify every 1 delay 0`), the tangential histories carried over from the old
 //! list to the new by partner. It reads the state of `scenes/bench/chute.ron` after Talus
-//! has built it (the same grains, in the same order in memory: rows of cells). Three
+//! has built it (the same grains, in the same order in memory: rows of cells). Four
 //! kernels ([`Variant`]): LAMMPS's algorithm as it stands; the same with Talus's staleness
-//! test (fewer list builds, the same results); and that one evaluating Talus's own linear
-//! law through its lane form, with Talus's contact life cycle. Each checks its physics
-//! first, 100 steps from the data file: the first two against LAMMPS's output for
-//! `bench/in.chute`, the third against Talus's own step (the run stops if one leaves them).
+//! test (fewer list builds, the same results); that one evaluating Talus's own linear law
+//! through its lane form, with Talus's contact life cycle; and that one testing only the
+//! pairs its blocks' moves can have closed, as Talus's narrow phase does. Each checks its
+//! physics first, 100 steps from the data file: the first two against LAMMPS's output for
+//! `bench/in.chute`, the others against Talus's own step (the run stops if one leaves
+//! them).
 //!
-//! The race: blocks of 7 steps of the three kernels and of Talus's step in turn, 1 thread,
+//! The race: blocks of 7 steps of the four kernels and of Talus's step in turn, 1 thread,
 //! the first step of each block untimed (`benches/chute_blocks.rs`'s method), with each
-//! kernel's time split into list builds, force loop, and kicks with drift.
+//! kernel's time split into list builds, force loop, and kicks with drift, and its tests a
+//! grain-step.
 //!
 //! `cargo bench --bench lammps_kernel` (40 rounds); `TALUS_ROUNDS=n` changes the rounds and
 //! `TALUS_REPLICA=r` races `r` × `r` copies of the chute as well, in an eighth as many
@@ -48,9 +51,9 @@ static ALLOCATOR: talus::cli::alloc::HugePageAllocator = talus::cli::alloc::Huge
 /// Steps of a block; its first is not timed.
 const BLOCK_STEPS: u64 = 7;
 
-/// The chute of `replica` × `replica` copies, built and primed by Talus, with the three
+/// The chute of `replica` × `replica` copies, built and primed by Talus, with the
 /// kernels made from the same state.
-fn chute_and_kernels(replica: u32) -> (Simulation, [Kernel; 3], usize) {
+fn chute_and_kernels(replica: u32) -> (Simulation, [Kernel; Variant::ALL.len()], usize) {
     let (sim, grains) = chute(replica, replica, |_| {});
     let tilt = 26f64.to_radians();
     let gravity = DVec3::new(tilt.sin(), 0.0, -tilt.cos());
@@ -90,6 +93,7 @@ fn race(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
     }
     pool.install(|| sim.run_steps(20).expect("the chute steps"));
     let builds_before = kernels.each_ref().map(|k| k.builds);
+    let tested_before = kernels.each_ref().map(|k| k.tested);
     let split_before = kernels.each_ref().map(|k| k.seconds);
     // Seconds of the kernels and of Talus (last), in all and per round.
     const VARIANTS: usize = Variant::ALL.len() + 1;
@@ -121,7 +125,8 @@ fn race(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
         println!(
             "  the {} kernel {:.1} ({:.2} M grain-steps/s): list builds {:.1} ({} builds), \
              force loop {:.1}, kicks, drift and staleness {:.1}; against Talus {:.3} over \
-             all rounds, {:.3} by the rounds' median; {:.2} listed pairs a grain",
+             all rounds, {:.3} by the rounds' median; {:.2} listed pairs a grain, {:.2} \
+             tested a grain-step",
             kernel.variant.name(),
             ns(v),
             1e3 / ns(v),
@@ -132,6 +137,7 @@ fn race(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
             ns(TALUS) / ns(v),
             median(against),
             kernel.partner.len() as f64 / grains as f64,
+            (kernel.tested - tested_before[v]) as f64 / steps,
         );
     }
     println!(
@@ -163,7 +169,7 @@ fn main() {
             kernel.step();
         }
         let (translational, rotational) = kernel.energies();
-        let (reference, by) = if kernel.variant == Variant::TalusLaw {
+        let (reference, by) = if kernel.variant.talus_law() {
             (TALUS_STEP_100, "Talus")
         } else {
             (LAMMPS_STEP_100, "LAMMPS")
@@ -180,7 +186,7 @@ fn main() {
         // LAMMPS prints 8 digits: a kernel outside them is not LAMMPS's algorithm, and
         // its race would say nothing. Talus's law must give Talus's step to rounding (its
         // forces are summed in another order).
-        let tolerance = if kernel.variant == Variant::TalusLaw {
+        let tolerance = if kernel.variant.talus_law() {
             (1e-6, 1e-8)
         } else {
             (0.01, 1e-4)

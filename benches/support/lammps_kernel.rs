@@ -3,9 +3,10 @@
 //! `newton on`, `nve/sphere`, `fix gravity` and `fix freeze` as LAMMPS's sources write
 //! them, over a half neighbour list with a skin of 0.1, the tangential histories carried
 //! from list to list by partner. Its [`Variant`]s: LAMMPS's algorithm as it stands; the
-//! same with Talus's staleness test; and that one evaluating Talus's own linear law with
-//! Talus's contact life cycle. `benches/lammps_kernel.rs` races them against Talus's step;
-//! `tests/reference_chute.rs` checks Talus's step against the third.
+//! same with Talus's staleness test; that one evaluating Talus's own linear law with
+//! Talus's contact life cycle; and that one testing only a prefix of each grain's partners,
+//! as Talus's narrow phase does. `benches/lammps_kernel.rs` races them against Talus's
+//! step; `tests/reference_chute.rs` checks Talus's step against the third.
 
 use std::time::Instant;
 
@@ -46,11 +47,22 @@ pub enum Variant {
     /// if it carried a force, its history (the law's state, the last normal and overlap)
     /// kept in the list's entry.
     TalusLaw,
+    /// The Talus-law kernel testing, like Talus's narrow phase, only the pairs whose gap at
+    /// the build the moves since can have closed: each grain's partners in order of that
+    /// gap (live contacts first), a prefix of them tested, up to the largest bound so far
+    /// of the moves of its block of `BLOCK_GRAINS` grains against its partners' blocks'
+    /// (`BlockMoves::pair_bound` in Talus).
+    TalusLawPruned,
 }
 
 impl Variant {
     /// Every variant, in the order the bench reports them.
-    pub const ALL: [Variant; 3] = [Variant::Plain, Variant::Refined, Variant::TalusLaw];
+    pub const ALL: [Variant; 4] = [
+        Variant::Plain,
+        Variant::Refined,
+        Variant::TalusLaw,
+        Variant::TalusLawPruned,
+    ];
 
     /// The variant's name in reports.
     pub fn name(self) -> &'static str {
@@ -58,9 +70,19 @@ impl Variant {
             Variant::Plain => "plain",
             Variant::Refined => "refined",
             Variant::TalusLaw => "Talus-law",
+            Variant::TalusLawPruned => "pruned Talus-law",
         }
     }
+
+    /// Whether the kernel evaluates Talus's law.
+    pub fn talus_law(self) -> bool {
+        matches!(self, Variant::TalusLaw | Variant::TalusLawPruned)
+    }
 }
+
+/// Grains of a block whose moves bound its pairs' closing (the pruned kernel), as Talus's
+/// neighbour list's chunks.
+const BLOCK_GRAINS: usize = 256;
 
 /// A contact's history under Talus's law, kept in its neighbour-list entry.
 #[derive(Clone, Copy, Default)]
@@ -125,6 +147,15 @@ pub struct Kernel {
     pending_len: usize,
     /// Neighbour-list builds so far.
     pub builds: u64,
+    /// Candidate pairs tested so far, in the force loops of steps.
+    pub tested: u64,
+    /// The pruned kernel: each entry's sort key (its gap at the build, −∞ for a contact
+    /// alive then), each block's partner blocks (`block_first`, `block_partners`), and the
+    /// largest closing bound of each block's pairs since the build.
+    gap: Vec<f64>,
+    block_first: Vec<usize>,
+    block_partners: Vec<u32>,
+    block_threshold: Vec<f64>,
     /// Seconds spent in the list builds, the force loop (with gravity and the freeze)
     /// and the rest of the steps (kicks, drift, staleness checks).
     pub seconds: [f64; 3],
@@ -198,6 +229,11 @@ impl Kernel {
             pending: [Pending::default(); 4],
             pending_len: 0,
             builds: 0,
+            tested: 0,
+            gap: Vec::new(),
+            block_first: Vec::new(),
+            block_partners: Vec::new(),
+            block_threshold: Vec::new(),
             seconds: [0.0; 3],
         };
         kernel.build_list();
@@ -312,8 +348,11 @@ impl Kernel {
         let mut shear = Vec::with_capacity(self.shear.len());
         let mut history = Vec::with_capacity(self.history.len());
         let mut flags = Vec::with_capacity(self.flags.len());
-        let talus_law = self.variant == Variant::TalusLaw;
+        let talus_law = self.variant.talus_law();
+        let pruned = self.variant == Variant::TalusLawPruned;
+        let mut gap = Vec::with_capacity(self.gap.len());
         let mut neighbours: Vec<u32> = Vec::new();
+        let mut keyed: Vec<(f64, u32, Option<usize>)> = Vec::new();
         for (i, &cell) in cells.iter().enumerate() {
             first.push(partner.len());
             neighbours.clear();
@@ -331,7 +370,8 @@ impl Kernel {
                     }
                 }
             }
-            // In memory order, as a sorted packing's lists come out of LAMMPS's bins.
+            // In memory order, as a sorted packing's lists come out of LAMMPS's bins (the
+            // pruned kernel's in order of gap, live contacts first).
             neighbours.sort_unstable();
             let old = if self.first.is_empty() {
                 &[][..]
@@ -339,9 +379,25 @@ impl Kernel {
                 &self.partner[self.first[i]..self.first[i + 1]]
             };
             let old_start = self.first.get(i).copied().unwrap_or(0);
+            keyed.clear();
             for &j in &neighbours {
                 let found = old.iter().position(|&o| o == j).map(|k| old_start + k);
+                let alive = talus_law && found.is_some_and(|k| self.flags[k] & ALIVE != 0);
+                let key = if alive {
+                    f64::NEG_INFINITY
+                } else {
+                    self.separation(i, j as usize).length()
+                        - self.radius[i]
+                        - self.radius[j as usize]
+                };
+                keyed.push((key, j, found));
+            }
+            if pruned {
+                keyed.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            }
+            for &(key, j, found) in &keyed {
                 partner.push(j);
+                gap.push(key);
                 if talus_law {
                     history.push(found.map_or(TalusHistory::default(), |k| self.history[k]));
                     flags.push(found.map_or(0, |k| self.flags[k]));
@@ -356,15 +412,34 @@ impl Kernel {
         self.shear = shear;
         self.history = history;
         self.flags = flags;
+        self.gap = gap;
         self.built_at = self.position.clone();
         self.builds += 1;
+        // Each block's partner blocks (its own among them), for the pruned kernel's bounds.
+        let blocks = n.div_ceil(BLOCK_GRAINS);
+        self.block_first.clear();
+        self.block_partners.clear();
+        for b in 0..blocks {
+            self.block_first.push(self.block_partners.len());
+            let start = self.block_partners.len();
+            self.block_partners.push(b as u32);
+            let grains = b * BLOCK_GRAINS..((b + 1) * BLOCK_GRAINS).min(n);
+            for &j in &self.partner[self.first[grains.start]..self.first[grains.end]] {
+                let pb = j / BLOCK_GRAINS as u32;
+                if !self.block_partners[start..].contains(&pb) {
+                    self.block_partners.push(pb);
+                }
+            }
+        }
+        self.block_first.push(self.block_partners.len());
+        self.block_threshold = vec![0.0; blocks];
     }
 
     /// Whether the list is stale: LAMMPS's test, any grain moved more than half the skin
     /// since the build; the others', Talus's bound D on every grain's move about
     /// the moves' common part (the smaller of the largest move and the half diagonal of
     /// the box bounding all moves) beyond half the skin (`architecture.md` §6).
-    fn list_stale(&self) -> bool {
+    fn list_stale(&mut self) -> bool {
         if self.variant == Variant::Plain {
             let limit = 0.25 * SKIN * SKIN;
             return self
@@ -372,6 +447,9 @@ impl Kernel {
                 .iter()
                 .zip(&self.built_at)
                 .any(|(p, b)| (*p - *b).length_squared() > limit);
+        }
+        if self.variant == Variant::TalusLawPruned {
+            return self.block_bounds();
         }
         let (mut largest, mut low, mut high) = (0.0f64, DVec3::INFINITY, DVec3::NEG_INFINITY);
         for (p, b) in self.position.iter().zip(&self.built_at) {
@@ -383,6 +461,42 @@ impl Kernel {
         largest.sqrt().min(0.5 * (high - low).length()) > 0.5 * SKIN
     }
 
+    /// The pruned kernel's staleness test (as the refined kernel's) and its blocks' closing
+    /// bounds: for grains of blocks a and b, |Δ_i − Δ_j| is at most the smaller of their
+    /// largest moves' sum and their moves' half diagonals' sum plus the distance between
+    /// the centres of the boxes bounding them.
+    fn block_bounds(&mut self) -> bool {
+        let n = self.position.len();
+        let blocks = n.div_ceil(BLOCK_GRAINS);
+        // Per block: the largest move, the centre and half diagonal of the moves' box.
+        let mut moves: Vec<(f64, DVec3, f64)> = Vec::with_capacity(blocks);
+        let (mut largest, mut low, mut high) = (0.0f64, DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for b in 0..blocks {
+            let grains = b * BLOCK_GRAINS..((b + 1) * BLOCK_GRAINS).min(n);
+            let (mut l2, mut lo, mut hi) = (0.0f64, DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for i in grains {
+                let moved = self.position[i] - self.built_at[i];
+                l2 = l2.max(moved.length_squared());
+                lo = lo.min(moved);
+                hi = hi.max(moved);
+            }
+            largest = largest.max(l2);
+            low = low.min(lo);
+            high = high.max(hi);
+            moves.push((l2.sqrt(), 0.5 * (lo + hi), 0.5 * (hi - lo).length()));
+        }
+        for a in 0..blocks {
+            let (ma, ua, sa) = moves[a];
+            let mut bound = 0.0f64;
+            for &b in &self.block_partners[self.block_first[a]..self.block_first[a + 1]] {
+                let (mb, ub, sb) = moves[b as usize];
+                bound = bound.max((ma + mb).min(sa + sb + (ua - ub).length()));
+            }
+            self.block_threshold[a] = self.block_threshold[a].max(bound);
+        }
+        largest.sqrt().min(0.5 * (high - low).length()) > 0.5 * SKIN
+    }
+
     /// `pair gran/hooke/history` (`newton on`), then gravity and the frozen grains' forces
     /// cleared (`fix gravity`, `fix freeze`). `advance`: whether the tangential histories
     /// take the step (not in LAMMPS's setup, its `shearupdate`).
@@ -390,15 +504,28 @@ impl Kernel {
         self.force.fill(DVec3::ZERO);
         self.torque.fill(DVec3::ZERO);
         let n = self.position.len();
+        let pruned = self.variant == Variant::TalusLawPruned;
         for i in 0..n {
             let radi = self.radius[i];
-            for k in self.first[i]..self.first[i + 1] {
+            let (start, mut end) = (self.first[i], self.first[i + 1]);
+            if pruned {
+                // A pair can touch only if its gap at the build is within its blocks'
+                // bound; a contact alive at the build (key −∞) is always within.
+                let reach = self.block_threshold[i / BLOCK_GRAINS];
+                end = start
+                    + self.gap[start..end]
+                        .iter()
+                        .take_while(|&&g| g <= reach)
+                        .count();
+            }
+            self.tested += (end - start) as u64;
+            for k in start..end {
                 let j = self.partner[k] as usize;
                 let del = self.separation(i, j);
                 let rsq = del.length_squared();
                 let radsum = radi + self.radius[j];
                 let touching = rsq < radsum * radsum;
-                if self.variant == Variant::TalusLaw {
+                if self.variant.talus_law() {
                     // Made on touching; kept while touching, and for one evaluation after
                     // the bodies part if it carried a force (Talus's narrow phase).
                     if touching || self.flags[k] == ALIVE | ACTIVE {
@@ -634,7 +761,8 @@ impl Kernel {
     /// Contacts of Talus's law that carried a force at their last evaluation: the count
     /// Talus reports (`ContactForce::is_active`). None for LAMMPS's law.
     pub fn active_contacts(&self) -> Option<usize> {
-        (self.variant == Variant::TalusLaw)
+        self.variant
+            .talus_law()
             .then(|| self.flags.iter().filter(|&&f| f & ACTIVE != 0).count())
     }
 
