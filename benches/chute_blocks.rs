@@ -22,7 +22,7 @@ mod chute_halves;
 use chute_halves::chute;
 #[path = "support/rounds.rs"]
 mod rounds;
-use rounds::median;
+use rounds::{env_count, median};
 use talus::core::resources::StageTimings;
 use talus::core::schedule::{Simulation, Stage};
 
@@ -103,14 +103,8 @@ fn spread(mut values: Vec<f64>) -> String {
 }
 
 fn main() {
-    let env = |name: &str, default: usize| {
-        std::env::var(name)
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(default)
-    };
-    let rounds = env("TALUS_ROUNDS", 40).max(1);
-    let replica = env("TALUS_REPLICA", 4).max(1) as u32;
+    let rounds = env_count("TALUS_ROUNDS", 40).max(1);
+    let replica = env_count("TALUS_REPLICA", 4).max(1) as u32;
     let pools: Vec<rayon::ThreadPool> = [1, 2]
         .iter()
         .map(|&t| {

@@ -20,7 +20,7 @@ mod chute_halves;
 use chute_halves::chute;
 #[path = "support/rounds.rs"]
 mod rounds;
-use rounds::median;
+use rounds::{env_count, median};
 
 /// The `talus` binary's allocator, as in the `chute` bench.
 #[global_allocator]
@@ -66,12 +66,7 @@ fn copies(count: usize, x: u32, y: u32) -> (Vec<Simulation>, usize) {
 }
 
 fn main() {
-    // `cargo bench` passes `--bench` (and any filter); this bench takes its settings from
-    // the environment instead.
-    let rounds: usize = std::env::var("TALUS_ROUNDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(5);
+    let rounds = env_count("TALUS_ROUNDS", 5);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()

@@ -17,7 +17,7 @@ mod chute_halves;
 use chute_halves::{ExchangedHalves, chute};
 #[path = "support/rounds.rs"]
 mod rounds;
-use rounds::median;
+use rounds::{env_count, median};
 
 /// The `talus` binary's allocator, as in the `chute` bench.
 #[global_allocator]
@@ -58,10 +58,7 @@ fn halves(atoms: &[talus::scene::lammps::Atom], r: u32, steps: u64) -> f64 {
 fn main() {
     // `cargo bench` passes `--bench` (and any filter); this bench takes its settings from
     // the environment instead.
-    let rounds: usize = std::env::var("TALUS_ROUNDS")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(5);
+    let rounds = env_count("TALUS_ROUNDS", 5);
     let replicas: Vec<u32> = std::env::var("TALUS_REPLICAS")
         .ok()
         .map(|s| s.split(',').filter_map(|r| r.trim().parse().ok()).collect())

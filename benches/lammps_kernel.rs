@@ -36,7 +36,7 @@ mod chute_halves;
 use chute_halves::chute;
 #[path = "support/rounds.rs"]
 mod rounds;
-use rounds::median;
+use rounds::{env_count, median};
 #[path = "support/lammps_kernel.rs"]
 #[allow(dead_code)]
 mod lammps_kernel;
@@ -148,14 +148,8 @@ fn race(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
 }
 
 fn main() {
-    let env = |name: &str, default: usize| {
-        std::env::var(name)
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(default)
-    };
-    let rounds = env("TALUS_ROUNDS", 40).max(1);
-    let replica = env("TALUS_REPLICA", 0) as u32;
+    let rounds = env_count("TALUS_ROUNDS", 40).max(1);
+    let replica = env_count("TALUS_REPLICA", 0) as u32;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()

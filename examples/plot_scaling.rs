@@ -13,6 +13,7 @@ use std::path::Path;
 use std::process::ExitCode;
 
 #[path = "../benches/support/rounds.rs"]
+#[allow(dead_code)]
 mod rounds;
 use rounds::median;
 
