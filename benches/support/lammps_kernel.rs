@@ -382,8 +382,11 @@ impl Kernel {
             keyed.clear();
             for &j in &neighbours {
                 let found = old.iter().position(|&o| o == j).map(|k| old_start + k);
+                // Only the pruned kernel reads the key (a square root a candidate).
                 let alive = talus_law && found.is_some_and(|k| self.flags[k] & ALIVE != 0);
-                let key = if alive {
+                let key = if !pruned {
+                    0.0
+                } else if alive {
                     f64::NEG_INFINITY
                 } else {
                     self.separation(i, j as usize).length()
@@ -397,7 +400,9 @@ impl Kernel {
             }
             for &(key, j, found) in &keyed {
                 partner.push(j);
-                gap.push(key);
+                if pruned {
+                    gap.push(key);
+                }
                 if talus_law {
                     history.push(found.map_or(TalusHistory::default(), |k| self.history[k]));
                     flags.push(found.map_or(0, |k| self.flags[k]));
