@@ -8,23 +8,27 @@
 //! 0.1 that is rebuilt when a grain has moved more than half the skin (each step checked,
 //! as `neigh_modify every 1 delay 0`), the tangential histories carried over from the old
 //! list to the new by partner. It reads the state of `scenes/bench/chute.ron` after Talus
-//! has built it (the same grains, in the same order in memory: rows of cells). Four
+//! has built it (the same grains, in the same order in memory: rows of cells). Five
 //! kernels ([`Variant`]): LAMMPS's algorithm as it stands; the same with Talus's staleness
-//! test (fewer list builds, the same results); that one evaluating Talus's own linear law
-//! through its lane form, with Talus's contact life cycle; and that one testing only the
-//! pairs its blocks' moves can have closed, as Talus's narrow phase does. Each checks its
-//! physics first, 100 steps from the data file: the first two against LAMMPS's output for
-//! `bench/in.chute`, the others against Talus's own step (the run stops if one leaves
-//! them).
+//! test (fewer list builds, the same results); that one in three passes as Talus's step
+//! takes them (overlap tests, force loop, sums: the same results); the second evaluating
+//! Talus's own linear law through its lane form, with Talus's contact life cycle; and that
+//! one testing only the pairs its blocks' moves can have closed, as Talus's narrow phase
+//! does. Each checks its physics first, 100 steps from the data file: the first three
+//! against LAMMPS's output for `bench/in.chute`, the others against Talus's own step (the
+//! run stops if one leaves them).
 //!
-//! The race: blocks of 7 steps of the four kernels and of Talus's step in turn, 1 thread,
+//! The race: blocks of 7 steps of the five kernels and of Talus's step in turn, 1 thread,
 //! the first step of each block untimed (`benches/chute_blocks.rs`'s method), with each
 //! kernel's time split into list builds, force loop, and kicks with drift, and its tests a
-//! grain-step.
+//! grain-step (and the three-pass kernel's time split into its passes).
 //!
 //! `cargo bench --bench lammps_kernel` (40 rounds); `TALUS_ROUNDS=n` changes the rounds and
-//! `TALUS_REPLICA=r` races `r` × `r` copies of the chute as well, in an eighth as many
-//! rounds (0: the 32,000-grain chute alone, the default).
+//! `TALUS_REPLICA=r` then races `r` × `r` copies of the chute and a fresh 32,000-grain
+//! chute in the same rounds, an eighth as many, for every kernel's and Talus's per-grain
+//! rate over the same steps (0: the 32,000-grain chute alone, the default). Sizes must be
+//! compared over the same steps: the LAMMPS-law kernels' rate drifts by some 9 % as the
+//! flow goes on (`docs/performance-log.md`, session 61).
 
 use std::time::Instant;
 
@@ -81,70 +85,190 @@ fn talus_block(sim: &mut Simulation) -> f64 {
     })
 }
 
-/// Races the kernels against Talus's step on `replica` × `replica` copies of the chute, all
-/// in turn in each round, their order turning from round to round.
-fn race(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
-    let (mut sim, mut kernels, grains) = pool.install(|| chute_and_kernels(replica));
-    // Warm up: lists built, tables sorted.
-    for kernel in &mut kernels {
-        for _ in 0..20 {
-            kernel.step();
+/// Seconds of the kernels and of Talus's step (last) in a round.
+const VARIANTS: usize = Variant::ALL.len() + 1;
+/// Talus's place among them.
+const TALUS: usize = VARIANTS - 1;
+
+/// The kernels and Talus's step on `replica` × `replica` copies of the chute, warmed up,
+/// and the seconds of each round.
+struct Race {
+    sim: Simulation,
+    kernels: [Kernel; Variant::ALL.len()],
+    grains: usize,
+    builds_before: [u64; Variant::ALL.len()],
+    tested_before: [u64; Variant::ALL.len()],
+    split_before: [[f64; 3]; Variant::ALL.len()],
+    passes_before: [[f64; 3]; Variant::ALL.len()],
+    distance_before: [f64; Variant::ALL.len()],
+    out_of_order_before: [f64; Variant::ALL.len()],
+    per_round: Vec<[f64; VARIANTS]>,
+}
+
+impl Race {
+    fn new(replica: u32, pool: &rayon::ThreadPool) -> Self {
+        let (mut sim, mut kernels, grains) = pool.install(|| chute_and_kernels(replica));
+        // Warm up: lists built, tables sorted.
+        for kernel in &mut kernels {
+            for _ in 0..20 {
+                kernel.step();
+            }
+        }
+        pool.install(|| sim.run_steps(20).expect("the chute steps"));
+        Self {
+            builds_before: kernels.each_ref().map(|k| k.builds),
+            tested_before: kernels.each_ref().map(|k| k.tested),
+            split_before: kernels.each_ref().map(|k| k.seconds),
+            passes_before: kernels.each_ref().map(|k| k.pass_seconds),
+            distance_before: kernels.each_ref().map(|k| k.mean_partner_distance()),
+            out_of_order_before: kernels.each_ref().map(|k| k.out_of_order),
+            sim,
+            kernels,
+            grains,
+            per_round: Vec::new(),
         }
     }
-    pool.install(|| sim.run_steps(20).expect("the chute steps"));
-    let builds_before = kernels.each_ref().map(|k| k.builds);
-    let tested_before = kernels.each_ref().map(|k| k.tested);
-    let split_before = kernels.each_ref().map(|k| k.seconds);
-    // Seconds of the kernels and of Talus (last), in all and per round.
-    const VARIANTS: usize = Variant::ALL.len() + 1;
-    const TALUS: usize = VARIANTS - 1;
-    let mut seconds = [0.0; VARIANTS];
-    let mut per_round: Vec<[f64; VARIANTS]> = Vec::with_capacity(rounds);
-    for round in 0..rounds {
+
+    /// One block of each kernel and of Talus's step, in an order that turns with `round`.
+    fn round(&mut self, round: usize, pool: &rayon::ThreadPool) {
         let mut this = [0.0; VARIANTS];
         for v in (0..VARIANTS).map(|k| (k + round) % VARIANTS) {
             this[v] = if v == TALUS {
-                pool.install(|| talus_block(&mut sim))
+                pool.install(|| talus_block(&mut self.sim))
             } else {
-                timed_block(|| kernels[v].step())
+                timed_block(|| self.kernels[v].step())
             };
         }
-        for v in 0..VARIANTS {
-            seconds[v] += this[v];
-        }
-        per_round.push(this);
+        self.per_round.push(this);
     }
-    let grain_steps = grains as f64 * (rounds as u64 * (BLOCK_STEPS - 1)) as f64;
-    let ns = |v: usize| seconds[v] / grain_steps * 1e9;
-    println!("{grains} grains, {rounds} rounds, ns a grain-step over all rounds:");
-    for (v, kernel) in kernels.iter().enumerate() {
-        // The parts count every step, the untimed ones too.
-        let steps = grains as f64 * (rounds as u64 * BLOCK_STEPS) as f64;
-        let part = |k: usize| (kernel.seconds[k] - split_before[v][k]) / steps * 1e9;
-        let against: Vec<f64> = per_round.iter().map(|r| r[TALUS] / r[v]).collect();
+
+    /// Ns a grain-step of each variant (Talus last) over all rounds.
+    fn ns(&self) -> [f64; VARIANTS] {
+        let rounds = self.per_round.len() as u64;
+        let grain_steps = self.grains as f64 * (rounds * (BLOCK_STEPS - 1)) as f64;
+        std::array::from_fn(|v| {
+            self.per_round.iter().map(|r| r[v]).sum::<f64>() / grain_steps * 1e9
+        })
+    }
+
+    /// Each kernel's time, its parts and its ratio to Talus's.
+    fn report(&self) {
+        let rounds = self.per_round.len();
+        let grains = self.grains;
+        let ns = self.ns();
+        println!("{grains} grains, {rounds} rounds, ns a grain-step over all rounds:");
+        for (v, kernel) in self.kernels.iter().enumerate() {
+            // The parts count every step, the untimed ones too.
+            let steps = grains as f64 * (rounds as u64 * BLOCK_STEPS) as f64;
+            let part = |k: usize| (kernel.seconds[k] - self.split_before[v][k]) / steps * 1e9;
+            let against: Vec<f64> = self.per_round.iter().map(|r| r[TALUS] / r[v]).collect();
+            println!(
+                "  the {} kernel {:.1} ({:.2} M grain-steps/s): list builds {:.1} ({} builds), \
+                 force loop {:.1}, kicks, drift and staleness {:.1}; against Talus {:.3} over \
+                 all rounds, {:.3} by the rounds' median; {:.2} listed pairs a grain, {:.2} \
+                 tested a grain-step, partners {:.0} grains apart in memory ({:.0} before the \
+                 rounds), {:.1} % of the grains out of their cells' order ({:.1} before)",
+                kernel.variant.name(),
+                ns[v],
+                1e3 / ns[v],
+                part(0),
+                kernel.builds - self.builds_before[v],
+                part(1),
+                part(2),
+                ns[TALUS] / ns[v],
+                median(against),
+                kernel.partner.len() as f64 / grains as f64,
+                (kernel.tested - self.tested_before[v]) as f64 / steps,
+                kernel.mean_partner_distance(),
+                self.distance_before[v],
+                100.0 * kernel.out_of_order,
+                100.0 * self.out_of_order_before[v],
+            );
+            if kernel.variant == Variant::Passes {
+                let pass =
+                    |k: usize| (kernel.pass_seconds[k] - self.passes_before[v][k]) / steps * 1e9;
+                println!(
+                    "    its force loop's passes: overlap tests {:.1}, forces {:.1}, sums {:.1}",
+                    pass(0),
+                    pass(1),
+                    pass(2)
+                );
+            }
+        }
         println!(
-            "  the {} kernel {:.1} ({:.2} M grain-steps/s): list builds {:.1} ({} builds), \
-             force loop {:.1}, kicks, drift and staleness {:.1}; against Talus {:.3} over \
-             all rounds, {:.3} by the rounds' median; {:.2} listed pairs a grain, {:.2} \
-             tested a grain-step",
-            kernel.variant.name(),
-            ns(v),
-            1e3 / ns(v),
-            part(0),
-            kernel.builds - builds_before[v],
-            part(1),
-            part(2),
-            ns(TALUS) / ns(v),
-            median(against),
-            kernel.partner.len() as f64 / grains as f64,
-            (kernel.tested - tested_before[v]) as f64 / steps,
+            "  Talus {:.1} ({:.2} M grain-steps/s)",
+            ns[TALUS],
+            1e3 / ns[TALUS]
+        );
+        // Whether a rate drifts as the flow goes on: the first and the last eighth of the
+        // rounds.
+        let eighth = rounds / 8;
+        if eighth > 0 {
+            let span = |r: &[[f64; VARIANTS]], v: usize| {
+                r.iter().map(|r| r[v]).sum::<f64>()
+                    / (grains as f64 * (r.len() as u64 * (BLOCK_STEPS - 1)) as f64)
+                    * 1e9
+            };
+            let (early, late) = (
+                &self.per_round[..eighth],
+                &self.per_round[rounds - eighth..],
+            );
+            let drift: Vec<String> = (0..VARIANTS)
+                .map(|v| format!("{:.1} → {:.1}", span(early, v), span(late, v)))
+                .collect();
+            println!(
+                "  the first and the last {eighth} rounds, in the order above: {}",
+                drift.join(", ")
+            );
+        }
+    }
+}
+
+/// Races the kernels against Talus's step on `replica` × `replica` copies of the chute, all
+/// in turn in each round, their order turning from round to round.
+fn race(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
+    let mut race = Race::new(replica, pool);
+    for round in 0..rounds {
+        race.round(round, pool);
+    }
+    race.report();
+}
+
+/// Each kernel's and Talus's per-grain rate at `replica` × `replica` copies of the chute
+/// against the 32,000-grain chute's: both sizes raced in the same rounds, from the same
+/// state and over the same steps (a kernel never sorts its grains in memory, so its rate
+/// at a size depends on how far the flow has carried them from their first order), the
+/// sizes' order turning from round to round.
+fn per_grain(replica: u32, rounds: usize, pool: &rayon::ThreadPool) {
+    let mut sizes = [Race::new(1, pool), Race::new(replica, pool)];
+    for round in 0..rounds {
+        for s in [round % 2, 1 - round % 2] {
+            sizes[s].round(round, pool);
+        }
+    }
+    for size in &sizes {
+        size.report();
+    }
+    let (small, large) = (sizes[0].ns(), sizes[1].ns());
+    println!(
+        "per-grain rate, {} grains against {}, over all rounds (the rounds' median):",
+        sizes[1].grains, sizes[0].grains
+    );
+    let names = Variant::ALL.map(|v| v.name());
+    for v in 0..VARIANTS {
+        let name = if v == TALUS { "Talus" } else { names[v] };
+        let by_round: Vec<f64> = sizes[0]
+            .per_round
+            .iter()
+            .zip(&sizes[1].per_round)
+            .map(|(a, b)| (a[v] / sizes[0].grains as f64) / (b[v] / sizes[1].grains as f64))
+            .collect();
+        println!(
+            "  {name}: {:.3} ({:.3})",
+            small[v] / large[v],
+            median(by_round)
         );
     }
-    println!(
-        "  Talus {:.1} ({:.2} M grain-steps/s)",
-        ns(TALUS),
-        1e3 / ns(TALUS)
-    );
 }
 
 fn main() {
@@ -157,6 +281,7 @@ fn main() {
     // The kernels' physics first: 100 steps from the data file's state, against LAMMPS's
     // output for LAMMPS's law and against Talus's own step for Talus's.
     let (_, kernels, _) = pool.install(|| chute_and_kernels(1));
+    let mut after_100 = Vec::new();
     for mut kernel in kernels {
         let start = kernel.energies();
         for _ in 0..100 {
@@ -191,9 +316,18 @@ fn main() {
             "the {} kernel left {by}'s energies",
             kernel.variant.name()
         );
+        after_100.push((kernel.variant, translational, rotational));
     }
+    // The three passes only part the refined kernel's work: the same sums in the same
+    // order.
+    let energies_of = |v: Variant| after_100.iter().find(|e| e.0 == v).map(|e| (e.1, e.2));
+    assert_eq!(
+        energies_of(Variant::Passes),
+        energies_of(Variant::Refined),
+        "the three-pass kernel left the refined kernel's bits"
+    );
     race(1, rounds, &pool);
     if replica > 1 {
-        race(replica, rounds.div_ceil(8), &pool);
+        per_grain(replica, rounds.div_ceil(8), &pool);
     }
 }

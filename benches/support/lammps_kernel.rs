@@ -3,10 +3,11 @@
 //! `newton on`, `nve/sphere`, `fix gravity` and `fix freeze` as LAMMPS's sources write
 //! them, over a half neighbour list with a skin of 0.1, the tangential histories carried
 //! from list to list by partner. Its [`Variant`]s: LAMMPS's algorithm as it stands; the
-//! same with Talus's staleness test; that one evaluating Talus's own linear law with
-//! Talus's contact life cycle; and that one testing only a prefix of each grain's partners,
-//! as Talus's narrow phase does. `benches/lammps_kernel.rs` races them against Talus's
-//! step; `tests/reference_chute.rs` checks Talus's step against the third.
+//! same with Talus's staleness test; that one split into Talus's passes (tests, forces,
+//! sums); the second evaluating Talus's own linear law with Talus's contact life cycle; and
+//! that one testing only a prefix of each grain's partners, as Talus's narrow phase does.
+//! `benches/lammps_kernel.rs` races them against Talus's step; `tests/reference_chute.rs`
+//! checks Talus's step against the one with Talus's law.
 
 use std::time::Instant;
 
@@ -41,6 +42,13 @@ pub enum Variant {
     /// LAMMPS's algorithm with the list's staleness judged by Talus's bound on the moves
     /// about their common part (fewer builds, the same results).
     Refined,
+    /// The refined kernel's work in Talus's passes instead of one: the overlap tests list
+    /// the touching pairs; the force loop over that list keeps each pair's force and both
+    /// torques in a record of its own (72 bytes, as Talus's `ContactForce`); the sums then
+    /// add the records to the grains' totals in the same order as the refined kernel adds
+    /// them (the same bits). What the single pass is worth, apart from the bytes and the
+    /// law.
+    Passes,
     /// The refined kernel evaluating Talus's linear law (`talus_linear_spring`, its lane
     /// form, four contacts at a time) with Talus's contact life cycle: a contact made
     /// where a pair first touches, evaluated while it touches and once more after it parts
@@ -57,9 +65,10 @@ pub enum Variant {
 
 impl Variant {
     /// Every variant, in the order the bench reports them.
-    pub const ALL: [Variant; 4] = [
+    pub const ALL: [Variant; 5] = [
         Variant::Plain,
         Variant::Refined,
+        Variant::Passes,
         Variant::TalusLaw,
         Variant::TalusLawPruned,
     ];
@@ -69,6 +78,7 @@ impl Variant {
         match self {
             Variant::Plain => "plain",
             Variant::Refined => "refined",
+            Variant::Passes => "three-pass",
             Variant::TalusLaw => "Talus-law",
             Variant::TalusLawPruned => "pruned Talus-law",
         }
@@ -102,6 +112,15 @@ struct Pending {
     j: usize,
     k: usize,
     del: DVec3,
+}
+
+/// A touching pair's force on its first grain and both grains' torques, kept between the
+/// three-pass kernel's force loop and its sums.
+#[derive(Clone, Copy, Default)]
+struct PairForce {
+    force: DVec3,
+    torque_i: DVec3,
+    torque_j: DVec3,
 }
 
 /// Bits of a list entry's state under Talus's law.
@@ -142,6 +161,15 @@ pub struct Kernel {
     flags: Vec<u8>,
     params: LinearParams,
     inverse_mass: Vec<f64>,
+    /// Grains in a cell (of the last list build) before their predecessor's in memory, as
+    /// a fraction of all: how far the flow has carried the grains from the order of
+    /// their cells, since the kernel never sorts them.
+    pub out_of_order: f64,
+    /// The three-pass kernel's touching pairs (first grain, list entry) and their forces.
+    touching: Vec<(u32, u32)>,
+    pair_forces: Vec<PairForce>,
+    /// Seconds the three-pass kernel spent in its tests, its force loop and its sums.
+    pub pass_seconds: [f64; 3],
     /// Contacts of Talus's law waiting for the lane form, and how many.
     pending: [Pending; 4],
     pending_len: usize,
@@ -226,6 +254,10 @@ impl Kernel {
                 friction: FRICTION,
             },
             inverse_mass: (0..n).map(|i| s.inverse_mass(i)).collect(),
+            out_of_order: 0.0,
+            touching: Vec::new(),
+            pair_forces: Vec::new(),
+            pass_seconds: [0.0; 3],
             pending: [Pending::default(); 4],
             pending_len: 0,
             builds: 0,
@@ -297,6 +329,11 @@ impl Kernel {
         // A counting sort of the grains by cell.
         let mut start = vec![0usize; nx * ny * nz + 1];
         let cells: Vec<[usize; 3]> = self.position.iter().map(|&p| cell_of(p)).collect();
+        self.out_of_order = cells
+            .windows(2)
+            .filter(|pair| index(pair[1]) < index(pair[0]))
+            .count() as f64
+            / n.max(1) as f64;
         for c in &cells {
             start[index(*c) + 1] += 1;
         }
@@ -508,6 +545,24 @@ impl Kernel {
     fn forces(&mut self, advance: bool) {
         self.force.fill(DVec3::ZERO);
         self.torque.fill(DVec3::ZERO);
+        if self.variant == Variant::Passes {
+            self.forces_in_passes(advance);
+        } else {
+            self.forces_in_one_pass(advance);
+        }
+        for i in 0..self.position.len() {
+            if self.frozen[i] {
+                self.force[i] = DVec3::ZERO;
+                self.torque[i] = DVec3::ZERO;
+            } else {
+                self.force[i] += self.mass[i] * self.gravity;
+            }
+        }
+    }
+
+    /// The pair loop of LAMMPS's shape: each candidate tested, and a touching pair's force
+    /// added to both grains' totals, in one pass over the list.
+    fn forces_in_one_pass(&mut self, advance: bool) {
         let n = self.position.len();
         let pruned = self.variant == Variant::TalusLawPruned;
         for i in 0..n {
@@ -548,20 +603,82 @@ impl Kernel {
         if self.pending_len > 0 {
             self.flush_talus(advance);
         }
-        for i in 0..n {
-            if self.frozen[i] {
-                self.force[i] = DVec3::ZERO;
-                self.torque[i] = DVec3::ZERO;
-            } else {
-                self.force[i] += self.mass[i] * self.gravity;
-            }
-        }
     }
 
     /// The force between touching grains `i` and `j`, pair `k` of the list, separated by
     /// `del` (`x_i − x_j`, `rsq` its square): `gran/hooke/history`'s loop body.
     #[inline(always)]
     fn pair(&mut self, i: usize, j: usize, k: usize, del: DVec3, rsq: f64, advance: bool) {
+        let p = self.pair_force(i, j, k, del, rsq, advance);
+        self.force[i] += p.force;
+        self.torque[i] += p.torque_i;
+        self.force[j] -= p.force;
+        self.torque[j] += p.torque_j;
+    }
+
+    /// The three-pass kernel's forces: the overlap tests (a touching pair listed, a parted
+    /// one's history cleared), the force loop over the touching pairs into their records,
+    /// and the sums of the records onto the grains, each a pass of its own.
+    fn forces_in_passes(&mut self, advance: bool) {
+        let n = self.position.len();
+        let began = Instant::now();
+        self.touching.clear();
+        for i in 0..n {
+            let radi = self.radius[i];
+            let (start, end) = (self.first[i], self.first[i + 1]);
+            self.tested += (end - start) as u64;
+            for k in start..end {
+                let j = self.partner[k] as usize;
+                let radsum = radi + self.radius[j];
+                if self.separation(i, j).length_squared() < radsum * radsum {
+                    self.touching.push((i as u32, k as u32));
+                } else {
+                    self.shear[k] = DVec3::ZERO;
+                }
+            }
+        }
+        let tested = Instant::now();
+        let mut pair_forces = std::mem::take(&mut self.pair_forces);
+        pair_forces.clear();
+        for c in 0..self.touching.len() {
+            let (i, k) = self.touching[c];
+            let (i, k) = (i as usize, k as usize);
+            let j = self.partner[k] as usize;
+            let del = self.separation(i, j);
+            pair_forces.push(self.pair_force(i, j, k, del, del.length_squared(), advance));
+        }
+        let forced = Instant::now();
+        for (&(i, k), p) in self.touching.iter().zip(&pair_forces) {
+            let (i, j) = (i as usize, self.partner[k as usize] as usize);
+            self.force[i] += p.force;
+            self.torque[i] += p.torque_i;
+            self.force[j] -= p.force;
+            self.torque[j] += p.torque_j;
+        }
+        self.pair_forces = pair_forces;
+        let end = Instant::now();
+        for (total, (from, to)) in
+            self.pass_seconds
+                .iter_mut()
+                .zip([(began, tested), (tested, forced), (forced, end)])
+        {
+            *total += (to - from).as_secs_f64();
+        }
+    }
+
+    /// `gran/hooke/history`'s force between touching grains `i` and `j` (pair `k`,
+    /// separated by `del`, `rsq` its square), their history advanced: the force on `i` and
+    /// the torques on both (a torque `t` added as `+(−r t)`, the bits of LAMMPS's `−= r t`).
+    #[inline(always)]
+    fn pair_force(
+        &mut self,
+        i: usize,
+        j: usize,
+        k: usize,
+        del: DVec3,
+        rsq: f64,
+        advance: bool,
+    ) -> PairForce {
         let (radi, radj) = (self.radius[i], self.radius[j]);
         let radsum = radi + radj;
         let r = rsq.sqrt();
@@ -622,10 +739,11 @@ impl Kernel {
                 del.z * fs.x - del.x * fs.z,
                 del.x * fs.y - del.y * fs.x,
             );
-        self.force[i] += f;
-        self.torque[i] -= radi * tor;
-        self.force[j] -= f;
-        self.torque[j] -= radj * tor;
+        PairForce {
+            force: f,
+            torque_i: -(radi * tor),
+            torque_j: -(radj * tor),
+        }
     }
 
     /// Queues Talus's linear law between grains `i` and `j` (entry `k`, separated by
@@ -769,6 +887,21 @@ impl Kernel {
         self.variant
             .talus_law()
             .then(|| self.flags.iter().filter(|&&f| f & ACTIVE != 0).count())
+    }
+
+    /// How far apart in memory the list's pairs are: the mean of `j − i` over its entries,
+    /// in grains. The kernel never sorts its grains, so this grows as the flow carries
+    /// them from the rows of cells Talus stored them in.
+    pub fn mean_partner_distance(&self) -> f64 {
+        let total: u64 = (0..self.position.len())
+            .map(|i| {
+                self.partner[self.first[i]..self.first[i + 1]]
+                    .iter()
+                    .map(|&j| u64::from(j) - i as u64)
+                    .sum::<u64>()
+            })
+            .sum();
+        total as f64 / self.partner.len().max(1) as f64
     }
 
     /// Σ½mv² and Σ½Iω² over every grain, as LAMMPS's `ke` and `erotate/sphere`.
