@@ -11,8 +11,10 @@
 //! the caches. Blocks of 7 steps fall across the contact-table sort (every 20 steps) at
 //! every phase, so no variant always gets the steps right after a sort.
 //!
-//! `cargo bench --bench chute_blocks` (40 rounds); `TALUS_ROUNDS=n` changes the rounds and
-//! `TALUS_REPLICA=r` the large packing (`r` × `r` copies; 2 for 128,000 grains).
+//! `cargo bench --bench chute_blocks` (40 rounds); `TALUS_ROUNDS=n` changes the rounds,
+//! `TALUS_REPLICA=r` the large packing (`r` × `r` copies; 2 for 128,000 grains) and
+//! `TALUS_BLOCK_STEPS=s` the steps of a block (7; an `s` that 20 divides would give one
+//! pool the steps after each sort).
 
 use std::time::Instant;
 
@@ -30,7 +32,7 @@ use talus::core::schedule::{Simulation, Stage};
 #[global_allocator]
 static ALLOCATOR: talus::cli::alloc::HugePageAllocator = talus::cli::alloc::HugePageAllocator;
 
-/// Steps of a block; its first is not timed.
+/// Steps of a block unless `TALUS_BLOCK_STEPS` says otherwise; its first is not timed.
 const BLOCK_STEPS: u64 = 7;
 
 /// Blocks of the small chute on each pool in a round.
@@ -69,13 +71,13 @@ fn builds(sim: &Simulation) -> u64 {
 
 /// Steps `sim` one block on `pool`, adding the timed steps to `tally`. The pool's other
 /// workers poll for work through the whole block, as through `talus run`'s loop of steps.
-fn block(sim: &mut Simulation, pool: &rayon::ThreadPool, tally: &mut Tally) {
+fn block(sim: &mut Simulation, pool: &rayon::ThreadPool, steps: u64, tally: &mut Tally) {
     pool.install(|| {
         talus::core::workers::with_workers_polling(|| {
             sim.step_before_another().expect("the chute steps");
             let (before, built) = (stage_seconds(sim), builds(sim));
             let start = Instant::now();
-            for _ in 1..BLOCK_STEPS {
+            for _ in 1..steps {
                 sim.step_before_another().expect("the chute steps");
             }
             tally.seconds += start.elapsed().as_secs_f64();
@@ -84,7 +86,7 @@ fn block(sim: &mut Simulation, pool: &rayon::ThreadPool, tally: &mut Tally) {
             for (total, (a, b)) in tally.stages.iter_mut().zip(after.iter().zip(&before)) {
                 *total += a - b;
             }
-            tally.steps += BLOCK_STEPS - 1;
+            tally.steps += steps - 1;
             tally.builds += builds(sim) - built;
         })
     });
@@ -105,6 +107,7 @@ fn spread(mut values: Vec<f64>) -> String {
 fn main() {
     let rounds = env_count("TALUS_ROUNDS", 40).max(1);
     let replica = env_count("TALUS_REPLICA", 4).max(1) as u32;
+    let block_steps = env_count("TALUS_BLOCK_STEPS", BLOCK_STEPS as usize).max(2) as u64;
     let pools: Vec<rayon::ThreadPool> = [1, 2]
         .iter()
         .map(|&t| {
@@ -135,11 +138,11 @@ fn main() {
                 [order[1], order[0]]
             };
             for p in pair {
-                block(&mut small, &pools[p], &mut this[p]);
+                block(&mut small, &pools[p], block_steps, &mut this[p]);
             }
         }
         for p in order {
-            block(&mut large, &pools[p], &mut this[2 + p]);
+            block(&mut large, &pools[p], block_steps, &mut this[2 + p]);
         }
         for (total, t) in totals.iter_mut().zip(&this) {
             total.seconds += t.seconds;
@@ -154,7 +157,7 @@ fn main() {
     }
     let grains = [small_grains, small_grains, large_grains, large_grains];
     println!(
-        "{rounds} rounds; blocks of {BLOCK_STEPS} steps, the first untimed; ns a grain-step \
+        "{rounds} rounds; blocks of {block_steps} steps, the first untimed; ns a grain-step \
          over all rounds"
     );
     println!(
