@@ -100,7 +100,6 @@ struct Race {
     tested_before: [u64; Variant::ALL.len()],
     split_before: [[f64; 3]; Variant::ALL.len()],
     passes_before: [[f64; 3]; Variant::ALL.len()],
-    distance_before: [f64; Variant::ALL.len()],
     out_of_order_before: [f64; Variant::ALL.len()],
     per_round: Vec<[f64; VARIANTS]>,
 }
@@ -120,7 +119,6 @@ impl Race {
             tested_before: kernels.each_ref().map(|k| k.tested),
             split_before: kernels.each_ref().map(|k| k.seconds),
             passes_before: kernels.each_ref().map(|k| k.pass_seconds),
-            distance_before: kernels.each_ref().map(|k| k.mean_partner_distance()),
             out_of_order_before: kernels.each_ref().map(|k| k.out_of_order),
             sim,
             kernels,
@@ -144,11 +142,13 @@ impl Race {
 
     /// Ns a grain-step of each variant (Talus last) over all rounds.
     fn ns(&self) -> [f64; VARIANTS] {
-        let rounds = self.per_round.len() as u64;
-        let grain_steps = self.grains as f64 * (rounds * (BLOCK_STEPS - 1)) as f64;
-        std::array::from_fn(|v| {
-            self.per_round.iter().map(|r| r[v]).sum::<f64>() / grain_steps * 1e9
-        })
+        self.ns_over(&self.per_round)
+    }
+
+    /// Ns a grain-step of each variant (Talus last) over `rounds`, some of this race's.
+    fn ns_over(&self, rounds: &[[f64; VARIANTS]]) -> [f64; VARIANTS] {
+        let grain_steps = self.grains as f64 * (rounds.len() as u64 * (BLOCK_STEPS - 1)) as f64;
+        std::array::from_fn(|v| rounds.iter().map(|r| r[v]).sum::<f64>() / grain_steps * 1e9)
     }
 
     /// Each kernel's time, its parts and its ratio to Talus's.
@@ -166,8 +166,8 @@ impl Race {
                 "  the {} kernel {:.1} ({:.2} M grain-steps/s): list builds {:.1} ({} builds), \
                  force loop {:.1}, kicks, drift and staleness {:.1}; against Talus {:.3} over \
                  all rounds, {:.3} by the rounds' median; {:.2} listed pairs a grain, {:.2} \
-                 tested a grain-step, partners {:.0} grains apart in memory ({:.0} before the \
-                 rounds), {:.1} % of the grains out of their cells' order ({:.1} before)",
+                 tested a grain-step, {:.1} % of the grains out of their cells' order ({:.1} \
+                 before the rounds)",
                 kernel.variant.name(),
                 ns[v],
                 1e3 / ns[v],
@@ -179,8 +179,6 @@ impl Race {
                 median(against),
                 kernel.partner.len() as f64 / grains as f64,
                 (kernel.tested - self.tested_before[v]) as f64 / steps,
-                kernel.mean_partner_distance(),
-                self.distance_before[v],
                 100.0 * kernel.out_of_order,
                 100.0 * self.out_of_order_before[v],
             );
@@ -204,17 +202,10 @@ impl Race {
         // rounds.
         let eighth = rounds / 8;
         if eighth > 0 {
-            let span = |r: &[[f64; VARIANTS]], v: usize| {
-                r.iter().map(|r| r[v]).sum::<f64>()
-                    / (grains as f64 * (r.len() as u64 * (BLOCK_STEPS - 1)) as f64)
-                    * 1e9
-            };
-            let (early, late) = (
-                &self.per_round[..eighth],
-                &self.per_round[rounds - eighth..],
-            );
+            let early = self.ns_over(&self.per_round[..eighth]);
+            let late = self.ns_over(&self.per_round[rounds - eighth..]);
             let drift: Vec<String> = (0..VARIANTS)
-                .map(|v| format!("{:.1} → {:.1}", span(early, v), span(late, v)))
+                .map(|v| format!("{:.1} → {:.1}", early[v], late[v]))
                 .collect();
             println!(
                 "  the first and the last {eighth} rounds, in the order above: {}",

@@ -889,21 +889,6 @@ impl Kernel {
             .then(|| self.flags.iter().filter(|&&f| f & ACTIVE != 0).count())
     }
 
-    /// How far apart in memory the list's pairs are: the mean of `j − i` over its entries,
-    /// in grains. The kernel never sorts its grains, so this grows as the flow carries
-    /// them from the rows of cells Talus stored them in.
-    pub fn mean_partner_distance(&self) -> f64 {
-        let total: u64 = (0..self.position.len())
-            .map(|i| {
-                self.partner[self.first[i]..self.first[i + 1]]
-                    .iter()
-                    .map(|&j| u64::from(j) - i as u64)
-                    .sum::<u64>()
-            })
-            .sum();
-        total as f64 / self.partner.len().max(1) as f64
-    }
-
     /// Σ½mv² and Σ½Iω² over every grain, as LAMMPS's `ke` and `erotate/sphere`.
     pub fn energies(&self) -> (f64, f64) {
         let mut translational = 0.0;
