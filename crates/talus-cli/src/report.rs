@@ -173,6 +173,12 @@ pub struct WallClock {
     pub stepping: f64,
     /// Per stage, over the time steps (not the priming pass), s.
     pub stages: BTreeMap<String, f64>,
+    /// Per stage, the thread-seconds the pool's other threads waited for work while it
+    /// ran, summed over them (all zero on one thread): its serial work and load
+    /// imbalance. On `n` threads a stage's share of idle threads is
+    /// `stage_idle / ((n − 1) × stages)`.
+    #[serde(default)]
+    pub stage_idle: BTreeMap<String, f64>,
     /// Grain-steps per second of the time steps: grains × steps / `stepping`.
     pub grain_steps_per_second: f64,
     /// Re-sorts of the grains in memory between the time steps (`sort_grains_every`; the

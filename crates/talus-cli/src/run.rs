@@ -244,7 +244,8 @@ pub fn run_scene(
         // The pool's other workers poll for work through the whole loop, not only through
         // each step: between two steps they went back to rayon's idle loop and joined the
         // next step's first parallel loop some 10 µs late (`with_workers_polling`).
-        talus_core::workers::with_workers_polling(|| {
+        let idle = sim.world.resource::<StageTimings>().idle.clone();
+        talus_core::workers::with_workers_polling_booked(Some(&idle), || {
             for step in sim.step_count() + 1..=total_steps {
                 let due = kinetic_due(step);
                 sim.world.resource_mut::<KineticEnergyDue>().0 = due;
@@ -335,6 +336,10 @@ pub fn run_scene(
             stages: Stage::ALL
                 .iter()
                 .map(|s| (s.name().to_string(), timings.get(*s)))
+                .collect(),
+            stage_idle: Stage::ALL
+                .iter()
+                .map(|s| (s.name().to_string(), timings.idle_seconds(*s)))
                 .collect(),
             grain_steps_per_second: built.grain_count as f64
                 * steps_run.saturating_sub(first_step) as f64

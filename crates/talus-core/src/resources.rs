@@ -120,6 +120,10 @@ pub struct StageTimings {
     pub grain_sorts: u64,
     /// Seconds those re-sorts took (outside every stage).
     pub grain_sort_seconds: f64,
+    /// Where the thread pool's other workers book the time they wait for work, stage by
+    /// stage (by the stage's index in [`Stage::ALL`](crate::schedule::Stage::ALL)): shared
+    /// with them while a step runs ([`crate::workers::with_workers_polling_booked`]).
+    pub idle: std::sync::Arc<crate::workers::IdleBook>,
 }
 
 impl StageTimings {
@@ -132,12 +136,19 @@ impl StageTimings {
             .unwrap_or(0.0)
     }
 
-    /// Forgets the seconds (and re-sorts) accumulated so far (a stage being timed goes on
-    /// being timed).
+    /// Thread-seconds the pool's other workers waited for work while `stage` ran, summed
+    /// over them (0 on one thread): the stage's serial work and load imbalance.
+    pub fn idle_seconds(&self, stage: crate::schedule::Stage) -> f64 {
+        self.idle.seconds(stage.index())
+    }
+
+    /// Forgets the seconds (and re-sorts, and idle time) accumulated so far (a stage being
+    /// timed goes on being timed).
     pub fn clear(&mut self) {
         self.seconds.clear();
         self.grain_sorts = 0;
         self.grain_sort_seconds = 0.0;
+        self.idle.clear();
     }
 }
 

@@ -40,6 +40,9 @@ pub enum Stage {
     Export,
 }
 
+// Every stage has its part of the workers' idle book.
+const _: () = assert!(Stage::ALL.len() <= crate::workers::IdleBook::PARTS);
+
 impl Stage {
     /// All stages in execution order.
     pub const ALL: [Stage; 10] = [
@@ -54,6 +57,14 @@ impl Stage {
         Stage::Sample,
         Stage::Export,
     ];
+
+    /// The stage's place in [`Stage::ALL`] (its order in a step).
+    pub fn index(self) -> usize {
+        Stage::ALL
+            .iter()
+            .position(|s| *s == self)
+            .expect("every stage is in Stage::ALL")
+    }
 
     /// Snake-case name used in reports and plans.
     pub fn name(self) -> &'static str {
@@ -514,11 +525,14 @@ fn mark_stage(stage: Stage) -> impl FnMut(ResMut<StageTimings>) {
         let now = Instant::now();
         timings.close_mark(now);
         timings.last_mark = Some((stage, now));
+        timings.idle.enter(stage.index());
     }
 }
 
 impl StageTimings {
     fn close_mark(&mut self, now: Instant) {
+        // Between steps the workers' idle time belongs to no stage.
+        self.idle.enter(crate::workers::IdleBook::NONE);
         if let Some((stage, start)) = self.last_mark.take() {
             let elapsed = (now - start).as_secs_f64();
             match self.seconds.iter_mut().find(|(s, _)| *s == stage) {
@@ -697,8 +711,9 @@ impl Simulation {
     }
 
     fn run_pass(&mut self) -> Result<(), BlowUp> {
+        let idle = self.world.resource::<StageTimings>().idle.clone();
         let (schedule, world) = (&mut self.schedule, &mut self.world);
-        crate::workers::with_workers_polling(|| schedule.run(world));
+        crate::workers::with_workers_polling_booked(Some(&idle), || schedule.run(world));
         // Despawned contacts leave removal messages in the world until its trackers are
         // cleared (an app does it every frame): without this they pile up for the whole
         // run, about 80 bytes per grain every 100 steps of a flowing packing.
